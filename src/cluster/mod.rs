@@ -1,0 +1,638 @@
+//! Everything MPI (SPEC 3): rank roles, the coordinator's executor that
+//! scatters exact collision and Dantzig solves over workers, the worker loop,
+//! and the render rank.
+//!
+//! Roles: rank 0 coordinates (and does its own, smaller share); ranks 1 … N−2
+//! are workers; the last rank renders when the scene has a `[render]` section
+//! and `--no-render` is not given, otherwise it is a worker too. One rank runs
+//! the same stages inline.
+
+pub mod protocol;
+pub mod schedule;
+
+use crate::body::ObjectDef;
+use crate::collision::narrowphase::{self, PairResult, PairTask};
+use crate::contact::solver::{self, IslandResult, IslandTask};
+use crate::output::summary::{Distribution, RankSummary};
+use crate::run::{Frame, FrameRenderer, FrameSink};
+use crate::scene::Scene;
+use crate::step::Executor;
+use mpi::point_to_point::{Destination, Source};
+use mpi::request::{Request, StaticScope};
+use mpi::topology::{Communicator, SimpleCommunicator};
+use protocol::{RenderMessage, RenderReport, Reply, Request as Req, WorkerReport, decode, encode};
+use schedule::CostModel;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Roles {
+    pub size: i32,
+    pub workers: Vec<i32>,
+    pub renderer: Option<i32>,
+}
+
+impl Roles {
+    pub fn new(size: i32, render: bool) -> Roles {
+        let renderer = (render && size >= 2).then_some(size - 1);
+        let last_worker = if renderer.is_some() {
+            size - 2
+        } else {
+            size - 1
+        };
+        Roles {
+            size,
+            workers: (1..=last_worker).collect(),
+            renderer,
+        }
+    }
+
+    pub fn role_of(&self, rank: i32) -> &'static str {
+        if rank == 0 {
+            "coordinator"
+        } else if Some(rank) == self.renderer {
+            "renderer"
+        } else {
+            "worker"
+        }
+    }
+}
+
+/// Test aid: `--slow-rank R=F` makes rank R take F times longer per batch
+/// (it sleeps (F − 1)× its compute time), like a PC another user is loading.
+pub fn slow_factor(slow: &[(i32, f64)], rank: i32) -> f64 {
+    slow.iter()
+        .filter(|(r, _)| *r == rank)
+        .map(|(_, f)| *f)
+        .fold(1.0, f64::max)
+}
+
+fn stall(factor: f64, busy: Duration) -> Duration {
+    if factor > 1.0 {
+        let extra = busy.mul_f64(factor - 1.0);
+        std::thread::sleep(extra);
+        busy + extra
+    } else {
+        busy
+    }
+}
+
+#[derive(Default, Clone)]
+struct RankBook {
+    tasks_np: u64,
+    tasks_is: u64,
+    cost_s: f64,
+    busy_s: f64,
+    waiting_s: f64,
+    bytes_sent: u64,
+    bytes_received: u64,
+}
+
+/// A stage is distributed only when its estimated cost exceeds this many
+/// round-trip latencies per worker (below it, messages cost more than they save).
+const DISTRIBUTE_LATENCIES: f64 = 4.0;
+/// Share of its speed that rank 0 plans for itself (it also packs and merges).
+const COORDINATOR_SHARE: f64 = 0.5;
+
+/// Rank 0's executor: decides per stage and per frame whether to distribute,
+/// assigns tasks by cost, sends one message to each worker, does its own
+/// share, gathers, and merges results in task order.
+pub struct MpiExecutor<'w> {
+    world: &'w SimpleCommunicator,
+    roles: Roles,
+    model: CostModel,
+    /// Estimated speed per slot: slot 0 is rank 0, slot k is `roles.workers[k-1]`.
+    speeds: Vec<f64>,
+    book: Vec<RankBook>,
+    latency_s: f64,
+    dist: Distribution,
+    polygons: Vec<usize>,
+    /// Distribute regardless of cost (tests of determinism and balance).
+    pub force_distribute: bool,
+}
+
+impl<'w> MpiExecutor<'w> {
+    pub fn new(world: &'w SimpleCommunicator, roles: Roles, objects: &[ObjectDef]) -> Self {
+        let slots = roles.workers.len() + 1;
+        let mut exec = MpiExecutor {
+            world,
+            model: CostModel::default(),
+            speeds: vec![1.0; slots],
+            book: vec![RankBook::default(); slots],
+            latency_s: 0.0,
+            dist: Distribution::default(),
+            polygons: objects.iter().map(|o| o.polygon_count).collect(),
+            force_distribute: false,
+            roles,
+        };
+        exec.measure_latency();
+        exec
+    }
+
+    /// Median round trip of a tiny message to each worker.
+    fn measure_latency(&mut self) {
+        let mut samples = Vec::new();
+        for _ in 0..5 {
+            for &w in &self.roles.workers.clone() {
+                let t = Instant::now();
+                self.send(w, &Req::Ping);
+                let _ = self.receive(w);
+                samples.push(t.elapsed().as_secs_f64());
+            }
+        }
+        samples.sort_by(f64::total_cmp);
+        self.latency_s = samples.get(samples.len() / 2).copied().unwrap_or(0.0);
+        self.dist.message_latency_s = self.latency_s;
+    }
+
+    fn slot_of(&self, rank: i32) -> usize {
+        self.roles
+            .workers
+            .iter()
+            .position(|&w| w == rank)
+            .map_or(0, |p| p + 1)
+    }
+
+    fn send(&mut self, rank: i32, req: &Req) {
+        let bytes = encode(req);
+        let slot = self.slot_of(rank);
+        self.book[slot].bytes_sent += bytes.len() as u64;
+        self.world
+            .process_at_rank(rank)
+            .send_with_tag(&bytes[..], protocol::TAG_REQUEST);
+    }
+
+    fn receive(&mut self, rank: i32) -> Reply {
+        let (bytes, _) = self
+            .world
+            .process_at_rank(rank)
+            .receive_vec_with_tag::<u8>(protocol::TAG_REPLY);
+        let slot = self.slot_of(rank);
+        self.book[slot].bytes_received += bytes.len() as u64;
+        decode(&bytes).unwrap_or_else(|e| {
+            eprintln!("rigidsim: rank 0: bad reply from rank {rank}: {e}");
+            self.world.abort(4)
+        })
+    }
+
+    fn should_distribute(&self, estimated_s: f64, tasks: usize) -> bool {
+        if self.roles.workers.is_empty() || tasks < 2 {
+            return false;
+        }
+        self.force_distribute
+            || estimated_s > DISTRIBUTE_LATENCIES * self.latency_s * self.roles.workers.len() as f64
+    }
+
+    /// Splits tasks by the greedy rule; returns per slot the task indices.
+    fn plan(&self, costs: &[f64]) -> Vec<Vec<usize>> {
+        let slot = schedule::assign(costs, &self.speeds, COORDINATOR_SHARE);
+        let mut per = vec![Vec::new(); self.speeds.len()];
+        for (i, s) in slot.into_iter().enumerate() {
+            per[s].push(i);
+        }
+        per
+    }
+
+    /// Generic scatter–compute–gather for one stage.
+    fn distribute<T: Clone, R>(
+        &mut self,
+        tasks: Vec<T>,
+        costs: &[f64],
+        make: impl Fn(Vec<T>) -> Req,
+        local: impl Fn(&[T]) -> Vec<R>,
+        unpack: impl Fn(Reply) -> Option<(Vec<R>, f64)>,
+    ) -> (Vec<R>, f64, f64)
+    where
+        R: Default + Clone,
+    {
+        let plan = self.plan(costs);
+        // Send each worker its share (one message each).
+        for (k, idx) in plan.iter().enumerate().skip(1) {
+            if idx.is_empty() {
+                continue;
+            }
+            let rank = self.roles.workers[k - 1];
+            let share: Vec<T> = idx.iter().map(|&i| tasks[i].clone()).collect();
+            let cost: f64 = idx.iter().map(|&i| costs[i]).sum();
+            self.book[k].cost_s += cost;
+            self.send(rank, &make(share));
+        }
+        // Rank 0's own share.
+        let own: Vec<T> = plan[0].iter().map(|&i| tasks[i].clone()).collect();
+        let clock = Instant::now();
+        let own_results = local(&own);
+        let own_s = clock.elapsed().as_secs_f64();
+        let own_cost: f64 = plan[0].iter().map(|&i| costs[i]).sum();
+        self.book[0].busy_s += own_s;
+        self.book[0].cost_s += own_cost;
+        let mut results: Vec<R> = vec![R::default(); tasks.len()];
+        for (r, &i) in own_results.into_iter().zip(&plan[0]) {
+            results[i] = r;
+        }
+        // Gather, merging by task index (never arrival order).
+        let wait = Instant::now();
+        for (k, idx) in plan.iter().enumerate().skip(1) {
+            if idx.is_empty() {
+                continue;
+            }
+            let rank = self.roles.workers[k - 1];
+            let Some((rs, busy)) = unpack(self.receive(rank)) else {
+                eprintln!("rigidsim: rank 0: rank {rank} answered the wrong message");
+                self.world.abort(4);
+            };
+            if rs.len() != idx.len() {
+                eprintln!(
+                    "rigidsim: rank 0: rank {rank} returned {} results for {} tasks",
+                    rs.len(),
+                    idx.len()
+                );
+                self.world.abort(4);
+            }
+            let cost: f64 = idx.iter().map(|&i| costs[i]).sum();
+            self.book[k].busy_s += busy;
+            if busy > 0.0 && cost > 0.0 {
+                // Speed relative to the model calibrated on rank 0.
+                self.speeds[k] = schedule::smooth(self.speeds[k], (cost / busy).clamp(0.01, 100.0));
+            }
+            for (r, &i) in rs.into_iter().zip(idx) {
+                results[i] = r;
+            }
+        }
+        let waited = wait.elapsed().as_secs_f64();
+        self.book[0].waiting_s += waited;
+        (results, own_s, own_cost)
+    }
+
+    /// Tells workers and renderer to stop; collects their reports.
+    pub fn stop(&mut self) -> Vec<(i32, WorkerReport)> {
+        let mut reports = Vec::new();
+        for &w in &self.roles.workers.clone() {
+            self.send(w, &Req::Stop);
+            if let Reply::Report(r) = self.receive(w) {
+                reports.push((w, r));
+            }
+        }
+        reports
+    }
+
+    pub fn summaries(&self, workers: &[(i32, WorkerReport)]) -> Vec<RankSummary> {
+        let mut out = vec![RankSummary {
+            rank: 0,
+            role: "coordinator".into(),
+            busy_s: self.book[0].busy_s,
+            waiting_s: self.book[0].waiting_s,
+            tasks: self.book[0].tasks_np + self.book[0].tasks_is,
+            narrowphase_tasks: self.book[0].tasks_np,
+            island_tasks: self.book[0].tasks_is,
+            estimated_cost_s: self.book[0].cost_s,
+            bytes_sent: self.book.iter().map(|b| b.bytes_sent).sum(),
+            bytes_received: self.book.iter().map(|b| b.bytes_received).sum(),
+            speed: self.speeds[0],
+            frames_rendered: 0,
+        }];
+        for (k, &w) in self.roles.workers.iter().enumerate() {
+            let rep = workers
+                .iter()
+                .find(|(r, _)| *r == w)
+                .map(|(_, r)| r.clone())
+                .unwrap_or_default();
+            out.push(RankSummary {
+                rank: w as u32,
+                role: "worker".into(),
+                busy_s: rep.busy_s,
+                waiting_s: rep.waiting_s,
+                tasks: rep.narrowphase_tasks + rep.island_tasks,
+                narrowphase_tasks: rep.narrowphase_tasks,
+                island_tasks: rep.island_tasks,
+                estimated_cost_s: self.book[k + 1].cost_s,
+                bytes_sent: rep.bytes_sent,
+                bytes_received: rep.bytes_received,
+                speed: self.speeds[k + 1],
+                frames_rendered: 0,
+            });
+        }
+        out
+    }
+}
+
+impl Executor for MpiExecutor<'_> {
+    fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
+        let reports = self.stop();
+        (self.summaries(&reports), self.dist.clone())
+    }
+
+    fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
+        let units: Vec<f64> = tasks
+            .iter()
+            .map(|t| {
+                schedule::pair_units(
+                    self.polygons[t.object_a as usize],
+                    self.polygons[t.object_b as usize],
+                )
+            })
+            .collect();
+        let costs: Vec<f64> = units.iter().map(|u| u * self.model.pair_coef).collect();
+        let total: f64 = costs.iter().sum();
+        if !self.should_distribute(total, tasks.len()) {
+            self.dist.narrowphase_local += 1;
+            let clock = Instant::now();
+            let r: Vec<PairResult> = tasks
+                .iter()
+                .map(|t| narrowphase::query_pair(objects, t))
+                .collect();
+            let s = clock.elapsed().as_secs_f64();
+            self.model.calibrate_pairs(units.iter().sum(), s);
+            self.book[0].busy_s += s;
+            self.book[0].tasks_np += tasks.len() as u64;
+            return r;
+        }
+        self.dist.narrowphase_distributed += 1;
+        let plan_sizes = tasks.len();
+        let (results, own_s, own_cost) = self.distribute(
+            tasks,
+            &costs,
+            |share| Req::Narrowphase { tasks: share },
+            |own| {
+                own.iter()
+                    .map(|t| narrowphase::query_pair(objects, t))
+                    .collect()
+            },
+            |reply| match reply {
+                Reply::Narrowphase { results, busy_s } => Some((results, busy_s)),
+                _ => None,
+            },
+        );
+        if own_cost > 0.0 {
+            self.model
+                .calibrate_pairs(own_cost / self.model.pair_coef, own_s);
+        }
+        self.book[0].tasks_np += plan_sizes as u64;
+        results
+    }
+
+    fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
+        let units: Vec<f64> = tasks
+            .iter()
+            .map(|t| {
+                let rows: usize = t
+                    .contacts
+                    .iter()
+                    .map(|c| if c.friction > 0.0 { 3 } else { 1 })
+                    .sum();
+                schedule::island_units(rows)
+            })
+            .collect();
+        let costs: Vec<f64> = units.iter().map(|u| u * self.model.island_coef).collect();
+        let total: f64 = costs.iter().sum();
+        if !self.should_distribute(total, tasks.len()) {
+            self.dist.solve_local += 1;
+            let clock = Instant::now();
+            let r: Vec<IslandResult> = tasks.iter().map(solver::solve_island).collect();
+            let s = clock.elapsed().as_secs_f64();
+            self.model.calibrate_islands(units.iter().sum(), s);
+            self.book[0].busy_s += s;
+            self.book[0].tasks_is += tasks.len() as u64;
+            return r;
+        }
+        self.dist.solve_distributed += 1;
+        let n = tasks.len();
+        let (results, own_s, own_cost) = self.distribute(
+            tasks,
+            &costs,
+            |share| Req::SolveIslands { tasks: share },
+            |own| own.iter().map(solver::solve_island).collect(),
+            |reply| match reply {
+                Reply::SolveIslands { results, busy_s } => Some((results, busy_s)),
+                _ => None,
+            },
+        );
+        if own_cost > 0.0 {
+            self.model
+                .calibrate_islands(own_cost / self.model.island_coef, own_s);
+        }
+        self.book[0].tasks_is += n as u64;
+        results
+    }
+}
+
+/// A worker rank: answers requests from rank 0 until `Stop`.
+pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
+    let root = world.process_at_rank(0);
+    let mut report = WorkerReport::default();
+    loop {
+        let wait = Instant::now();
+        let (bytes, _) = root.receive_vec_with_tag::<u8>(protocol::TAG_REQUEST);
+        report.waiting_s += wait.elapsed().as_secs_f64();
+        report.bytes_received += bytes.len() as u64;
+        let req: Req = match decode(&bytes) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("rigidsim: rank {}: {e}", world.rank());
+                world.abort(4);
+            }
+        };
+        let clock = Instant::now();
+        let reply = match req {
+            Req::Ping => Reply::Pong,
+            Req::Stop => Reply::Report(report.clone()),
+            Req::Narrowphase { tasks } => {
+                report.narrowphase_tasks += tasks.len() as u64;
+                let results = tasks
+                    .iter()
+                    .map(|t| narrowphase::query_pair(&scene.objects, t))
+                    .collect();
+                let busy = stall(slow, clock.elapsed()).as_secs_f64();
+                report.busy_s += busy;
+                Reply::Narrowphase {
+                    results,
+                    busy_s: busy,
+                }
+            }
+            Req::SolveIslands { tasks } => {
+                report.island_tasks += tasks.len() as u64;
+                let results = tasks.iter().map(solver::solve_island).collect();
+                let busy = stall(slow, clock.elapsed()).as_secs_f64();
+                report.busy_s += busy;
+                Reply::SolveIslands {
+                    results,
+                    busy_s: busy,
+                }
+            }
+        };
+        let stop = matches!(reply, Reply::Report(_));
+        let out = encode(&reply);
+        report.bytes_sent += out.len() as u64;
+        root.send_with_tag(&out[..], protocol::TAG_REPLY);
+        if stop {
+            return;
+        }
+    }
+}
+
+/// Frames queued towards the renderer beyond which new frames are dropped.
+const MAX_FRAMES_IN_FLIGHT: usize = 4;
+
+/// Rank 0's side of the render stream: non-blocking sends with a bounded
+/// queue, so rendering never slows the simulation; when the renderer falls
+/// behind, frames are dropped and counted.
+pub struct RemoteFrames<'w> {
+    world: &'w SimpleCommunicator,
+    renderer: i32,
+    in_flight: Vec<(Request<'static, [u8], StaticScope>, *mut [u8])>,
+    pub dropped: u64,
+    pub bytes_sent: u64,
+    report: Option<RenderReport>,
+}
+
+impl<'w> RemoteFrames<'w> {
+    pub fn new(world: &'w SimpleCommunicator, renderer: i32) -> Self {
+        RemoteFrames {
+            world,
+            renderer,
+            in_flight: Vec::new(),
+            dropped: 0,
+            bytes_sent: 0,
+            report: None,
+        }
+    }
+
+    /// Completes finished sends and frees their buffers.
+    fn reap(&mut self) {
+        let mut still = Vec::new();
+        for (req, buf) in self.in_flight.drain(..) {
+            match req.test() {
+                // SAFETY: the buffer was leaked from a Box in `post` and MPI is
+                // done with it once the request completed.
+                Ok(_) => drop(unsafe { Box::from_raw(buf) }),
+                Err(req) => still.push((req, buf)),
+            }
+        }
+        self.in_flight = still;
+    }
+
+    fn post(&mut self, msg: &RenderMessage) {
+        let bytes = encode(msg).into_boxed_slice();
+        self.bytes_sent += bytes.len() as u64;
+        let raw: *mut [u8] = Box::into_raw(bytes);
+        // SAFETY: `raw` stays allocated until the request completes (see `reap`).
+        let buf: &'static [u8] = unsafe { &*raw };
+        let req = self
+            .world
+            .process_at_rank(self.renderer)
+            .immediate_send_with_tag(StaticScope, buf, protocol::TAG_FRAME);
+        self.in_flight.push((req, raw));
+    }
+}
+
+impl FrameSink for RemoteFrames<'_> {
+    fn publish(&mut self, frame: Frame) {
+        self.reap();
+        if self.in_flight.len() >= MAX_FRAMES_IN_FLIGHT {
+            self.dropped += 1;
+            return;
+        }
+        self.post(&RenderMessage::Frame(frame));
+    }
+
+    fn rank_summary(&self) -> Option<RankSummary> {
+        let r = self.report.as_ref()?;
+        Some(RankSummary {
+            rank: self.renderer as u32,
+            role: "renderer".into(),
+            busy_s: r.busy_s,
+            bytes_received: r.bytes_received,
+            frames_rendered: r.rendered,
+            speed: 1.0,
+            ..Default::default()
+        })
+    }
+
+    fn finish(&mut self, last: Frame) -> (u64, u64, Option<String>, Vec<String>) {
+        self.post(&RenderMessage::Finish(last));
+        for (req, buf) in self.in_flight.drain(..) {
+            req.wait();
+            // SAFETY: as in `reap`: the send completed.
+            drop(unsafe { Box::from_raw(buf) });
+        }
+        let (bytes, _) = self
+            .world
+            .process_at_rank(self.renderer)
+            .receive_vec_with_tag::<u8>(protocol::TAG_RENDER_REPORT);
+        let report: RenderReport = decode(&bytes).unwrap_or_default();
+        self.report = Some(report.clone());
+        (
+            report.rendered,
+            report.dropped + self.dropped,
+            report.adapter,
+            report.notes,
+        )
+    }
+}
+
+/// The render rank: draws every frame it receives; when several are waiting
+/// it draws the newest and counts the others as dropped. Never sends back
+/// until the final report.
+pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) {
+    let root = world.process_at_rank(0);
+    let mut report = RenderReport::default();
+    let mut renderer = match FrameRenderer::new(scene, out_dir) {
+        Ok(r) => {
+            report.adapter = Some(r.adapter());
+            Some(r)
+        }
+        Err(e) => {
+            eprintln!(
+                "rigidsim: rank {} (renderer): {e}; frames will not be drawn",
+                world.rank()
+            );
+            report.notes.push(format!("renderer unavailable: {e}"));
+            None
+        }
+    };
+    let mut pending: BTreeMap<u64, Frame> = BTreeMap::new();
+    loop {
+        let (bytes, _) = root.receive_vec_with_tag::<u8>(protocol::TAG_FRAME);
+        report.bytes_received += bytes.len() as u64;
+        let msg: RenderMessage = match decode(&bytes) {
+            Ok(m) => m,
+            Err(e) => {
+                eprintln!("rigidsim: renderer: {e}");
+                continue;
+            }
+        };
+        match msg {
+            RenderMessage::Frame(f) => {
+                pending.insert(f.index, f);
+                // Catch up: if more frames already wait, draw only the newest.
+                if root.immediate_probe_with_tag(protocol::TAG_FRAME).is_some() {
+                    continue;
+                }
+                let newest = pending.pop_last().map(|(_, f)| f);
+                report.dropped += pending.len() as u64;
+                pending.clear();
+                if let (Some(r), Some(f)) = (renderer.as_mut(), newest) {
+                    let clock = Instant::now();
+                    if let Err(e) = r.render_frame(&f) {
+                        report.notes.push(format!("frame {}: {e}", f.index));
+                    }
+                    report.busy_s += clock.elapsed().as_secs_f64();
+                }
+            }
+            RenderMessage::Finish(last) => {
+                if let Some(r) = renderer.as_mut() {
+                    for f in std::mem::take(&mut pending).into_values() {
+                        let _ = r.render_frame(&f);
+                    }
+                    if let Err(e) = r.finish(&last) {
+                        report.notes.push(format!("preview: {e}"));
+                    }
+                    report.rendered = r.rendered;
+                    report.notes.extend(r.notes.iter().cloned());
+                }
+                root.send_with_tag(&encode(&report)[..], protocol::TAG_RENDER_REPORT);
+                return;
+            }
+        }
+    }
+}

@@ -1,0 +1,90 @@
+//! Every message that crosses ranks (SPEC 3.4). At most one message to each
+//! worker and one back per distributed stage, plus one to the render rank per
+//! frame. Bodies travel as ids and changing state only: every rank loaded the
+//! scene, so shapes and masses never travel. Encoded with bincode.
+
+use crate::collision::narrowphase::{PairResult, PairTask};
+use crate::contact::solver::{IslandResult, IslandTask};
+use crate::run::Frame;
+use serde::{Deserialize, Serialize};
+
+/// Rank 0 → worker requests.
+pub const TAG_REQUEST: i32 = 10;
+/// Worker → rank 0 replies.
+pub const TAG_REPLY: i32 = 11;
+/// Rank 0 → renderer frames.
+pub const TAG_FRAME: i32 = 12;
+/// Renderer → rank 0, once, after the last frame.
+pub const TAG_RENDER_REPORT: i32 = 13;
+
+/// Sent by rank 0 to one worker.
+#[derive(Debug, Serialize, Deserialize)]
+pub enum Request {
+    /// `narrowphase` stage: V-Clip on these body pairs (poses and cached
+    /// feature ids included). Collision request of the thesis.
+    Narrowphase { tasks: Vec<PairTask> },
+    /// `solve_islands` stage: these contact systems. Contact request.
+    SolveIslands { tasks: Vec<IslandTask> },
+    /// Start-up latency probe: the worker answers `Pong` at once.
+    Ping,
+    /// End of run: the worker answers `Report` and exits.
+    Stop,
+}
+
+/// Sent by a worker to rank 0, in answer to one `Request`.
+#[derive(Debug, Serialize, Deserialize)]
+pub enum Reply {
+    /// Results in the order of the request's tasks, and the seconds computing them.
+    Narrowphase {
+        results: Vec<PairResult>,
+        busy_s: f64,
+    },
+    SolveIslands {
+        results: Vec<IslandResult>,
+        busy_s: f64,
+    },
+    Pong,
+    Report(WorkerReport),
+}
+
+/// A worker's own account of the run (for `summary.json`'s `per_rank`).
+#[derive(Debug, Default, Clone, Serialize, Deserialize)]
+pub struct WorkerReport {
+    pub busy_s: f64,
+    pub waiting_s: f64,
+    pub narrowphase_tasks: u64,
+    pub island_tasks: u64,
+    pub bytes_sent: u64,
+    pub bytes_received: u64,
+}
+
+/// Rank 0 → renderer. Never answered, but for the one report after `Finish`.
+#[derive(Debug, Serialize, Deserialize)]
+pub enum RenderMessage {
+    /// Body poses at a screen update (render message of the thesis).
+    Frame(Frame),
+    /// The final state: write `preview.png`, close the video, report.
+    Finish(Frame),
+}
+
+/// Renderer → rank 0 after `Finish`.
+#[derive(Debug, Default, Clone, Serialize, Deserialize)]
+pub struct RenderReport {
+    pub rendered: u64,
+    pub dropped: u64,
+    pub adapter: Option<String>,
+    pub notes: Vec<String>,
+    pub busy_s: f64,
+    pub bytes_received: u64,
+}
+
+pub fn encode<T: Serialize>(value: &T) -> Vec<u8> {
+    bincode::serde::encode_to_vec(value, bincode::config::standard())
+        .expect("in-memory bincode encoding cannot fail")
+}
+
+pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, String> {
+    bincode::serde::decode_from_slice(bytes, bincode::config::standard())
+        .map(|(v, _)| v)
+        .map_err(|e| format!("malformed message ({} bytes): {e}", bytes.len()))
+}

@@ -1,0 +1,1178 @@
+//! V-Clip: closest features, distance and penetration of two convex
+//! polyhedra (Mirtich, MERL TR-97-05; Ericson, *Real-Time Collision
+//! Detection* §9.2.1; the seed thesis, appendix A).
+//!
+//! The algorithm keeps one feature (vertex, edge or face) of each polyhedron.
+//! By theorem 1, if the closest points of the two features lie in each
+//! other's Voronoi regions, they are the closest points of the polyhedra.
+//! Each state (V-V, V-E, V-F, E-E, E-F) checks that condition and, if it
+//! fails, moves one feature to a neighbour so that the feature distance
+//! either drops, or stays the same while the feature dimension drops. The
+//! pair (distance, dimension) therefore never repeats, so in exact
+//! arithmetic there are no cycles.
+//!
+//! Edge tests clip the edge `e(λ) = t + λ (h − t)`, `λ ∈ [0, 1]`, against
+//! the planes of the other feature X's region, leaving `[λ_lo, λ_hi]` with
+//! the neighbours `N_lo`, `N_hi` across the clipping planes. The distance
+//! `D(λ) = min_{x∈X} |e(λ) − x|` is convex in λ, so whether its minimum lies
+//! inside the clipped interval follows from the sign of `D'` at its ends:
+//!
+//! ```text
+//!   sign D'(λ) = sign( u · (e(λ) − x*(λ)) ),  u = h − t,  x* the point of X nearest e(λ)
+//!   X vertex v:  u · (e(λ) − v)
+//!   X face F:    (u · n_F) · sign(n_F · e(λ) − offset_F)
+//! ```
+//!
+//! `D'(λ_lo) > 0` means the minimum lies below `λ_lo`, across the plane of
+//! `N_lo`, and X moves to `N_lo`; `D'(λ_hi) < 0` likewise moves X to `N_hi`.
+//!
+//! All comparisons are with exact zero, as in the original. Floating point
+//! can still cycle on degenerate configurations, so the walk is bounded and
+//! then falls back to an exhaustive search that is slow but always right.
+
+use nalgebra::{Isometry3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::polyhedron::{ConvexPolyhedron, VoronoiPlane};
+
+/// A vertex, edge or face of one polyhedron, by index into its tables.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Feature {
+    Vertex(u32),
+    Edge(u32),
+    Face(u32),
+}
+
+/// The closest features of polyhedra A and B. Plain data: cached per pair
+/// between frames and sent between ranks as a warm start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct FeaturePair {
+    pub a: Feature,
+    pub b: Feature,
+}
+
+/// Result of a V-Clip query.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Proximity {
+    /// Euclidean distance when separated (≥ 0). When penetrating, ≤ 0: the
+    /// depth of the witness vertex or edge end below the witness face's plane
+    /// (a local estimate, not the minimum translation distance), or the SAT
+    /// overlap when the answer came from the fallback.
+    pub distance: f64,
+    pub penetrating: bool,
+    /// The features reached; feed them back as the next warm start.
+    pub features: FeaturePair,
+    /// Witness point on A, world frame. Separated: the closest point.
+    pub point_a: Vector3<f64>,
+    /// Witness point on B, world frame; `|point_a − point_b| = |distance|`.
+    pub point_b: Vector3<f64>,
+    /// Number of V-Clip state evaluations.
+    pub iterations: u32,
+    /// True when the walk hit its iteration bound and the exhaustive search
+    /// answered instead.
+    pub fell_back: bool,
+}
+
+/// The iteration bound `closest_features` uses: twice the total feature
+/// count, at least 500. A converging walk needs a few dozen states even on a
+/// cold start; the bound only stops floating-point cycles.
+pub fn default_iteration_limit(a: &ConvexPolyhedron, b: &ConvexPolyhedron) -> u32 {
+    (2 * (a.feature_count() + b.feature_count())).max(500) as u32
+}
+
+/// Closest features of A and B (or a penetration witness), starting from
+/// `warm_start` when it names valid features of these polyhedra, otherwise
+/// from the vertices of each that face the other's centre.
+pub fn closest_features(
+    a: &ConvexPolyhedron,
+    pose_a: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pose_b: &Isometry3<f64>,
+    warm_start: Option<FeaturePair>,
+) -> Proximity {
+    let limit = default_iteration_limit(a, b);
+    closest_features_with_limit(a, pose_a, b, pose_b, warm_start, limit)
+}
+
+/// `closest_features` with an explicit iteration bound, after which the
+/// exhaustive fallback answers (`fell_back` is then set). Exposed so tests
+/// can force the fallback.
+pub fn closest_features_with_limit(
+    a: &ConvexPolyhedron,
+    pose_a: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pose_b: &Isometry3<f64>,
+    warm_start: Option<FeaturePair>,
+    max_iterations: u32,
+) -> Proximity {
+    let b_to_a = pose_a.inv_mul(pose_b);
+    let sa = Side {
+        poly: a,
+        from_other: b_to_a,
+    };
+    let sb = Side {
+        poly: b,
+        from_other: b_to_a.inverse(),
+    };
+    let mut pair = warm_start
+        .and_then(|p| validated(a, b, p))
+        .unwrap_or_else(|| cold_start(&sa, &sb));
+    let mut iterations = 0;
+    let found = loop {
+        if iterations == max_iterations {
+            return Proximity {
+                iterations,
+                fell_back: true,
+                ..exhaustive(a, pose_a, b, pose_b)
+            };
+        }
+        iterations += 1;
+        if std::env::var("VCLIP_TRACE").is_ok() {
+            eprintln!("  {iterations}: {pair:?}");
+        }
+        match step(&sa, &sb, pair) {
+            Step::P(f) => pair.a = f,
+            Step::Q(f) => pair.b = f,
+            Step::Done => match witness(a, pose_a, b, pose_b, pair) {
+                Some((point_a, point_b)) => {
+                    break Proximity {
+                        distance: (point_a - point_b).norm(),
+                        penetrating: false,
+                        features: pair,
+                        point_a,
+                        point_b,
+                        iterations,
+                        fell_back: false,
+                    };
+                }
+                None => {
+                    return Proximity {
+                        iterations,
+                        fell_back: true,
+                        ..exhaustive(a, pose_a, b, pose_b)
+                    };
+                }
+            },
+            Step::Contact(c) => {
+                break Proximity {
+                    distance: c.depth,
+                    penetrating: c.penetrating,
+                    features: FeaturePair { a: c.p, b: c.q },
+                    point_a: xf(pose_a, &c.on_p),
+                    point_b: xf(pose_b, &c.on_q),
+                    iterations,
+                    fell_back: false,
+                };
+            }
+        }
+    };
+    // Features that meet (distance 0) say nothing about the interiors: two
+    // cubes meeting corner to corner and two identical cubes at one pose
+    // both end on coincident vertices. The separating-axis test decides.
+    let size = a.scale().min(b.scale());
+    if !found.penetrating && found.distance <= TOUCHING_REL_TOL * size {
+        if let Some(deep) = sat_penetration(a, pose_a, b, pose_b, -TOUCHING_REL_TOL * size) {
+            return Proximity { iterations, ..deep };
+        }
+    }
+    found
+}
+
+/// Distances within this fraction of the smaller polyhedron's size of zero
+/// are rounding-level: such a pair touches, and is called penetrating only
+/// if the separating-axis test finds an overlap deeper than this.
+pub const TOUCHING_REL_TOL: f64 = 1e-12;
+
+/// One polyhedron of the pair, with the map from the other's local frame
+/// into its own.
+struct Side<'a> {
+    poly: &'a ConvexPolyhedron,
+    from_other: Isometry3<f64>,
+}
+
+impl Side<'_> {
+    fn vertex(&self, v: u32) -> Vector3<f64> {
+        self.poly.vertices()[v as usize]
+    }
+}
+
+/// Outcome of one state evaluation. `P`/`Q` replace the first or second
+/// feature of the state function's arguments.
+enum Step {
+    P(Feature),
+    Q(Feature),
+    Done,
+    Contact(Contact),
+}
+
+/// The features meet; points are in their own polyhedron's local frame.
+struct Contact {
+    p: Feature,
+    q: Feature,
+    on_p: Vector3<f64>,
+    on_q: Vector3<f64>,
+    depth: f64,
+    penetrating: bool,
+}
+
+impl Step {
+    fn swapped(self) -> Step {
+        match self {
+            Step::P(f) => Step::Q(f),
+            Step::Q(f) => Step::P(f),
+            Step::Done => Step::Done,
+            Step::Contact(c) => Step::Contact(Contact {
+                p: c.q,
+                q: c.p,
+                on_p: c.on_q,
+                on_q: c.on_p,
+                ..c
+            }),
+        }
+    }
+}
+
+#[inline]
+fn xf(iso: &Isometry3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
+    iso.rotation * v + iso.translation.vector
+}
+
+fn validated(a: &ConvexPolyhedron, b: &ConvexPolyhedron, pair: FeaturePair) -> Option<FeaturePair> {
+    let ok = |p: &ConvexPolyhedron, f: Feature| match f {
+        Feature::Vertex(i) => (i as usize) < p.vertex_count(),
+        Feature::Edge(i) => (i as usize) < p.edge_count(),
+        Feature::Face(i) => (i as usize) < p.face_count(),
+    };
+    if !ok(a, pair.a) || !ok(b, pair.b) {
+        return None;
+    }
+    // No state handles two faces; any vertex of A's face is an equally valid start.
+    if let (Feature::Face(fa), Feature::Face(_)) = (pair.a, pair.b) {
+        let v = a.faces()[fa as usize].vertices[0] as u32;
+        return Some(FeaturePair {
+            a: Feature::Vertex(v),
+            b: pair.b,
+        });
+    }
+    Some(pair)
+}
+
+fn cold_start(a: &Side, b: &Side) -> FeaturePair {
+    let b_centre_in_a = xf(&a.from_other, &b.poly.centroid());
+    let a_centre_in_b = xf(&b.from_other, &a.poly.centroid());
+    FeaturePair {
+        a: Feature::Vertex(a.poly.support_index(&(b_centre_in_a - a.poly.centroid())) as u32),
+        b: Feature::Vertex(b.poly.support_index(&(a_centre_in_b - b.poly.centroid())) as u32),
+    }
+}
+
+fn step(a: &Side, b: &Side, pair: FeaturePair) -> Step {
+    use Feature::*;
+    match (pair.a, pair.b) {
+        (Vertex(i), Vertex(j)) => vertex_vertex(a, b, i, j),
+        (Vertex(i), Edge(j)) => vertex_edge(a, b, i, j),
+        (Edge(i), Vertex(j)) => vertex_edge(b, a, j, i).swapped(),
+        (Vertex(i), Face(j)) => vertex_face(a, b, i, j),
+        (Face(i), Vertex(j)) => vertex_face(b, a, j, i).swapped(),
+        (Edge(i), Edge(j)) => edge_edge(a, b, i, j),
+        (Edge(i), Face(j)) => edge_face(a, b, i, j),
+        (Face(i), Edge(j)) => edge_face(b, a, j, i).swapped(),
+        // Unreachable: no transition produces it and `validated` removes it.
+        (Face(i), Face(_)) => Step::P(Vertex(a.poly.faces()[i as usize].vertices[0] as u32)),
+    }
+}
+
+/// The feature across plane `k` of an edge's region: tail, head, left, right.
+fn edge_neighbor(k: usize, plane: &VoronoiPlane) -> Feature {
+    if k < 2 {
+        Feature::Vertex(plane.neighbor)
+    } else {
+        Feature::Face(plane.neighbor)
+    }
+}
+
+/// V-V: each vertex must lie inside the other's region, bounded by one plane
+/// per incident edge. Crossing a plane means the edge is strictly closer.
+fn vertex_vertex(p: &Side, q: &Side, vp: u32, vq: u32) -> Step {
+    let xq = xf(&p.from_other, &q.vertex(vq));
+    for plane in p.poly.vertex_voronoi_planes(vp as usize) {
+        if plane.signed_distance(&xq) < 0.0 {
+            return Step::P(Feature::Edge(plane.neighbor));
+        }
+    }
+    let xp = xf(&q.from_other, &p.vertex(vp));
+    for plane in q.poly.vertex_voronoi_planes(vq as usize) {
+        if plane.signed_distance(&xp) < 0.0 {
+            return Step::Q(Feature::Edge(plane.neighbor));
+        }
+    }
+    Step::Done
+}
+
+/// V-E, vertex of P against edge of Q.
+fn vertex_edge(p: &Side, q: &Side, v: u32, e: u32) -> Step {
+    // V against VR(E). The vertex planes come first: beyond one, the edge's
+    // nearest point to V is that end vertex (same distance, lower dimension).
+    // Beyond a face plane only, moving into the face strictly lowers it.
+    let x = xf(&q.from_other, &p.vertex(v));
+    for (k, plane) in q.poly.edge_voronoi_planes(e as usize).iter().enumerate() {
+        if plane.signed_distance(&x) < 0.0 {
+            return Step::Q(edge_neighbor(k, plane));
+        }
+    }
+    // E against VR(V).
+    let edge = q.poly.edges()[e as usize];
+    let t = xf(&p.from_other, &q.vertex(edge.tail));
+    let h = xf(&p.from_other, &q.vertex(edge.head));
+    let planes = p.poly.vertex_voronoi_planes(v as usize);
+    let c = clip(planes, &t, &h);
+    if let Some(k) = c.excluded_by {
+        return Step::P(Feature::Edge(planes[k].neighbor));
+    }
+    let vx = p.vertex(v);
+    let u = h - t;
+    if let Some(k) = c.lo_plane {
+        if u.dot(&(t + u * c.lo - vx)) > 0.0 {
+            return Step::P(Feature::Edge(planes[k].neighbor));
+        }
+    }
+    if let Some(k) = c.hi_plane {
+        if u.dot(&(t + u * c.hi - vx)) < 0.0 {
+            return Step::P(Feature::Edge(planes[k].neighbor));
+        }
+    }
+    // Also reached by a compound exclusion whose derivatives both vanish,
+    // which needs E to pass through V: distance 0, a correct answer.
+    Step::Done
+}
+
+/// V-F, vertex of P against face of Q.
+fn vertex_face(p: &Side, q: &Side, v: u32, f: u32) -> Step {
+    let x = xf(&q.from_other, &p.vertex(v));
+    let side = q.poly.face_voronoi_planes(f as usize);
+    if side.iter().any(|plane| plane.signed_distance(&x) < 0.0) {
+        // V is outside F's prism, so F's nearest point to V is on F's
+        // boundary: move to the boundary edge nearest V (same distance, lower
+        // dimension). Mirtich takes the most violated plane instead; the
+        // nearest edge costs the same loop and keeps the distance exact.
+        let best = side
+            .iter()
+            .map(|plane| {
+                let edge = q.poly.edges()[plane.neighbor as usize];
+                let (t, h) = (q.vertex(edge.tail), q.vertex(edge.head));
+                let (c, _) = closest_on_segment(&x, &t, &h);
+                ((x - c).norm_squared(), plane.neighbor)
+            })
+            .min_by(|l, r| l.0.total_cmp(&r.0))
+            .map(|(_, e)| e)
+            .unwrap_or(0);
+        return Step::Q(Feature::Edge(best));
+    }
+    let face = &q.poly.faces()[f as usize];
+    let d = face.normal.dot(&x) - face.offset;
+    if d == 0.0 {
+        return Step::Done;
+    }
+    // F in VR(V)? The nearest point of F, x − d n, is in V's region iff no
+    // incident edge of V moves towards F's plane: for each edge leaving V
+    // towards w, d(w) must not be closer to 0 on the same side.
+    for &e in p.poly.vertex_edges(v as usize) {
+        let edge = p.poly.edges()[e as usize];
+        let other = if edge.tail == v { edge.head } else { edge.tail };
+        let w = xf(&q.from_other, &p.vertex(other));
+        let dw = face.normal.dot(&w) - face.offset;
+        if (d > 0.0 && dw < d) || (d < 0.0 && dw > d) {
+            return Step::P(Feature::Edge(e));
+        }
+    }
+    if d > 0.0 {
+        return Step::Done;
+    }
+    // Local minimum: V lies under F and every incident edge leads away from
+    // F's plane. Either some face plane of Q has V outside it (move there and
+    // go on), or V is inside every one of them, i.e. inside Q.
+    let (g, dmax) = q
+        .poly
+        .faces()
+        .iter()
+        .enumerate()
+        .map(|(g, fg)| (g, fg.normal.dot(&x) - fg.offset))
+        .max_by(|l, r| l.1.total_cmp(&r.1))
+        .unwrap_or((f as usize, d));
+    if dmax > 0.0 {
+        return Step::Q(Feature::Face(g as u32));
+    }
+    let fg = &q.poly.faces()[g];
+    Step::Contact(Contact {
+        p: Feature::Vertex(v),
+        q: Feature::Face(g as u32),
+        on_p: p.vertex(v),
+        on_q: x - fg.normal * dmax,
+        depth: dmax,
+        penetrating: dmax < 0.0,
+    })
+}
+
+/// E-E: each edge is clipped against the other's region.
+fn edge_edge(p: &Side, q: &Side, ep: u32, eq: u32) -> Step {
+    let edge_q = q.poly.edges()[eq as usize];
+    let s0 = xf(&p.from_other, &q.vertex(edge_q.tail));
+    let s1 = xf(&p.from_other, &q.vertex(edge_q.head));
+    if let Some(f) = edge_against_edge_region(p.poly, ep, &s0, &s1) {
+        return Step::P(f);
+    }
+    let edge_p = p.poly.edges()[ep as usize];
+    let r0 = xf(&q.from_other, &p.vertex(edge_p.tail));
+    let r1 = xf(&q.from_other, &p.vertex(edge_p.head));
+    if let Some(f) = edge_against_edge_region(q.poly, eq, &r0, &r1) {
+        return Step::Q(f);
+    }
+    Step::Done
+}
+
+/// Clips segment `s0 s1` (in `poly`'s frame) against VR(e) of `poly`: the
+/// two vertex planes first, then the two face planes. Returns the feature
+/// `e` should move to, if any.
+fn edge_against_edge_region(
+    poly: &ConvexPolyhedron,
+    e: u32,
+    s0: &Vector3<f64>,
+    s1: &Vector3<f64>,
+) -> Option<Feature> {
+    let planes = poly.edge_voronoi_planes(e as usize);
+    let u = s1 - s0;
+    // sign D'(λ) with X = e: u · (s(λ) − nearest point of e). On a vertex
+    // plane the nearest point is that vertex; on a face plane it is the
+    // projection onto e's line and the difference is along n_F, which gives
+    // the face formula of the module doc.
+    let slope = |lambda: f64| {
+        let s = s0 + u * lambda;
+        let t = poly.vertices()[poly.edges()[e as usize].tail as usize];
+        let dir = poly.edge_direction(e as usize);
+        let along = (s - t).dot(&dir).clamp(0.0, poly.edge_length(e as usize));
+        u.dot(&(s - t - dir * along))
+    };
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    let (mut lo_k, mut hi_k) = (None, None);
+    for (k, plane) in planes.iter().enumerate().take(2) {
+        let (d0, d1) = (plane.signed_distance(s0), plane.signed_distance(s1));
+        if d0 < 0.0 && d1 < 0.0 {
+            return Some(edge_neighbor(k, plane));
+        }
+        if d0 < 0.0 {
+            let l = d0 / (d0 - d1);
+            if l > lo {
+                (lo, lo_k) = (l, Some(k));
+            }
+        } else if d1 < 0.0 {
+            let l = d0 / (d0 - d1);
+            if l < hi {
+                (hi, hi_k) = (l, Some(k));
+            }
+        }
+    }
+    let (vlo, vhi, vlo_k, vhi_k) = (lo, hi, lo_k, hi_k);
+    let mut compound = lo > hi;
+    for (k, plane) in planes.iter().enumerate().skip(2) {
+        if compound {
+            break;
+        }
+        let (d0, d1) = (plane.signed_distance(s0), plane.signed_distance(s1));
+        if d0 < 0.0 && d1 < 0.0 {
+            // The segment is wholly on the face's side, yet its nearest point
+            // may be an end vertex of e (where the face's angle can be acute,
+            // so moving into the face need not help). Vertices win.
+            if let Some(j) = vlo_k {
+                if slope(vlo) > 0.0 {
+                    return Some(edge_neighbor(j, &planes[j]));
+                }
+            }
+            if let Some(j) = vhi_k {
+                if slope(vhi) < 0.0 {
+                    return Some(edge_neighbor(j, &planes[j]));
+                }
+            }
+            return Some(edge_neighbor(k, plane));
+        }
+        if d0 < 0.0 {
+            let l = d0 / (d0 - d1);
+            if l > lo {
+                (lo, lo_k) = (l, Some(k));
+            }
+        } else if d1 < 0.0 {
+            let l = d0 / (d0 - d1);
+            if l < hi {
+                (hi, hi_k) = (l, Some(k));
+            }
+        }
+        compound = lo > hi;
+    }
+    if compound {
+        // The segment misses VR(e), entering the plane of N_hi's region
+        // before leaving N_lo's. Convexity of D puts its minimum on the side
+        // the derivative points to; vertex neighbours are tested first.
+        let (lk, hk) = (lo_k?, hi_k?);
+        let pick = |k: usize| Some(edge_neighbor(k, &planes[k]));
+        return if lk < 2 {
+            pick(if slope(lo) >= 0.0 { lk } else { hk })
+        } else if hk < 2 {
+            pick(if slope(hi) <= 0.0 { hk } else { lk })
+        } else {
+            pick(if slope(lo) > 0.0 { lk } else { hk })
+        };
+    }
+    if let Some(k) = lo_k {
+        if slope(lo) > 0.0 {
+            return Some(edge_neighbor(k, &planes[k]));
+        }
+    }
+    if let Some(k) = hi_k {
+        if slope(hi) < 0.0 {
+            return Some(edge_neighbor(k, &planes[k]));
+        }
+    }
+    None
+}
+
+/// E-F, edge of P against face of Q. Never a final state when separated:
+/// if E does not meet F, the distance is linear in λ over the clipped
+/// interval and is smaller at one of its ends.
+fn edge_face(p: &Side, q: &Side, e: u32, f: u32) -> Step {
+    let edge = p.poly.edges()[e as usize];
+    let (tp, hp) = (p.vertex(edge.tail), p.vertex(edge.head));
+    let s0 = xf(&q.from_other, &tp);
+    let s1 = xf(&q.from_other, &hp);
+    let side = q.poly.face_voronoi_planes(f as usize);
+    let c = clip(side, &s0, &s1);
+    if c.excluded_by.is_some() || c.lo > c.hi {
+        // E misses F's prism, so F's nearest point to E is on F's boundary:
+        // move F to the boundary edge nearest E (same distance, lower
+        // dimension). Mirtich's implementation walks the boundary instead.
+        let best = side
+            .iter()
+            .map(|plane| {
+                let ef = q.poly.edges()[plane.neighbor as usize];
+                let (a, b) =
+                    closest_segment_points(&s0, &s1, &q.vertex(ef.tail), &q.vertex(ef.head));
+                ((a - b).norm_squared(), plane.neighbor)
+            })
+            .min_by(|l, r| l.0.total_cmp(&r.0))
+            .map(|(_, e)| e)
+            .unwrap_or(0);
+        return Step::Q(Feature::Edge(best));
+    }
+    let face = &q.poly.faces()[f as usize];
+    let d0 = face.normal.dot(&s0) - face.offset;
+    let d1 = face.normal.dot(&s1) - face.offset;
+    let dlo = d0 + c.lo * (d1 - d0);
+    let dhi = d0 + c.hi * (d1 - d0);
+    if (dlo <= 0.0 && dhi >= 0.0) || (dlo >= 0.0 && dhi <= 0.0) {
+        // The clipped edge reaches F's plane inside F's prism: E meets F.
+        let touching = dlo >= 0.0 && dhi >= 0.0;
+        let (lambda, depth) = if touching {
+            (if dlo == 0.0 { c.lo } else { c.hi }, 0.0)
+        } else if dlo < dhi {
+            (c.lo, dlo)
+        } else {
+            (c.hi, dhi)
+        };
+        return Step::Contact(Contact {
+            p: Feature::Edge(e),
+            q: Feature::Face(f),
+            on_p: tp + (hp - tp) * lambda,
+            on_q: s0 + (s1 - s0) * lambda - face.normal * depth,
+            depth,
+            penetrating: !touching,
+        });
+    }
+    let towards_lo = if dlo > 0.0 { dlo <= dhi } else { dlo >= dhi };
+    let next = if towards_lo {
+        c.lo_plane.map(|k| Step::Q(Feature::Edge(side[k].neighbor)))
+    } else {
+        c.hi_plane.map(|k| Step::Q(Feature::Edge(side[k].neighbor)))
+    };
+    next.unwrap_or(Step::P(Feature::Vertex(if towards_lo {
+        edge.tail
+    } else {
+        edge.head
+    })))
+}
+
+/// Segment `s0 s1` clipped against a region's planes: the part with every
+/// signed distance ≥ 0 is `[lo, hi]`; `lo > hi` means it misses (compound
+/// exclusion); `excluded_by` names a plane that both ends lie behind (simple
+/// exclusion).
+struct Clip {
+    lo: f64,
+    hi: f64,
+    lo_plane: Option<usize>,
+    hi_plane: Option<usize>,
+    excluded_by: Option<usize>,
+}
+
+fn clip(planes: &[VoronoiPlane], s0: &Vector3<f64>, s1: &Vector3<f64>) -> Clip {
+    let mut c = Clip {
+        lo: 0.0,
+        hi: 1.0,
+        lo_plane: None,
+        hi_plane: None,
+        excluded_by: None,
+    };
+    for (k, plane) in planes.iter().enumerate() {
+        let (d0, d1) = (plane.signed_distance(s0), plane.signed_distance(s1));
+        if d0 < 0.0 && d1 < 0.0 {
+            c.excluded_by = Some(k);
+            return c;
+        }
+        if d0 < 0.0 {
+            let l = d0 / (d0 - d1);
+            if l > c.lo {
+                c.lo = l;
+                c.lo_plane = Some(k);
+            }
+        } else if d1 < 0.0 {
+            let l = d0 / (d0 - d1);
+            if l < c.hi {
+                c.hi = l;
+                c.hi_plane = Some(k);
+            }
+        }
+        if c.lo > c.hi {
+            return c;
+        }
+    }
+    c
+}
+
+/// World closest points of a final feature pair.
+fn witness(
+    a: &ConvexPolyhedron,
+    pose_a: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pose_b: &Isometry3<f64>,
+    pair: FeaturePair,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let segment = |p: &ConvexPolyhedron, pose: &Isometry3<f64>, f: Feature| match f {
+        Feature::Vertex(v) => {
+            let x = xf(pose, &p.vertices()[v as usize]);
+            Some((x, x))
+        }
+        Feature::Edge(e) => {
+            let edge = p.edges()[e as usize];
+            Some((
+                xf(pose, &p.vertices()[edge.tail as usize]),
+                xf(pose, &p.vertices()[edge.head as usize]),
+            ))
+        }
+        Feature::Face(_) => None,
+    };
+    let onto_face = |p: &ConvexPolyhedron, pose: &Isometry3<f64>, f: u32, x: Vector3<f64>| {
+        let face = &p.faces()[f as usize];
+        let n = pose.rotation * face.normal;
+        let off = face.offset + n.dot(&pose.translation.vector);
+        x - n * (n.dot(&x) - off)
+    };
+    match (pair.a, pair.b) {
+        (Feature::Vertex(_), Feature::Face(f)) => {
+            let (x, _) = segment(a, pose_a, pair.a)?;
+            Some((x, onto_face(b, pose_b, f, x)))
+        }
+        (Feature::Face(f), Feature::Vertex(_)) => {
+            let (y, _) = segment(b, pose_b, pair.b)?;
+            Some((onto_face(a, pose_a, f, y), y))
+        }
+        (fa, fb) => {
+            let (p0, p1) = segment(a, pose_a, fa)?;
+            let (q0, q1) = segment(b, pose_b, fb)?;
+            Some(closest_segment_points(&p0, &p1, &q0, &q1))
+        }
+    }
+}
+
+/// Point of segment `a b` nearest `x`, and its parameter in [0, 1].
+pub fn closest_on_segment(
+    x: &Vector3<f64>,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+) -> (Vector3<f64>, f64) {
+    let u = b - a;
+    let uu = u.norm_squared();
+    if uu == 0.0 {
+        return (*a, 0.0);
+    }
+    let t = ((x - a).dot(&u) / uu).clamp(0.0, 1.0);
+    (a + u * t, t)
+}
+
+/// Closest points of segments `p0 p1` and `q0 q1` (Ericson §5.1.9), with
+/// (near-)parallel segments handled by clamping from an end point.
+pub fn closest_segment_points(
+    p0: &Vector3<f64>,
+    p1: &Vector3<f64>,
+    q0: &Vector3<f64>,
+    q1: &Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let d1 = p1 - p0;
+    let d2 = q1 - q0;
+    let r = p0 - q0;
+    let a = d1.norm_squared();
+    let e = d2.norm_squared();
+    let f = d2.dot(&r);
+    let (s, t);
+    if a == 0.0 && e == 0.0 {
+        (s, t) = (0.0, 0.0);
+    } else if a == 0.0 {
+        (s, t) = (0.0, (f / e).clamp(0.0, 1.0));
+    } else {
+        let c = d1.dot(&r);
+        if e == 0.0 {
+            (s, t) = ((-c / a).clamp(0.0, 1.0), 0.0);
+        } else {
+            let b = d1.dot(&d2);
+            let denom = a * e - b * b;
+            // For parallel segments any s works; start from s = 0 and let
+            // the clamping below find the overlap's end.
+            let s0 = if denom > 1e-14 * a * e {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let t0 = (b * s0 + f) / e;
+            if t0 < 0.0 {
+                (s, t) = ((-c / a).clamp(0.0, 1.0), 0.0);
+            } else if t0 > 1.0 {
+                (s, t) = (((b - c) / a).clamp(0.0, 1.0), 1.0);
+            } else {
+                (s, t) = (s0, t0);
+            }
+        }
+    }
+    (p0 + d1 * s, q0 + d2 * t)
+}
+
+/// Which kind of axis a separating-axis test settled on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AxisKind {
+    FaceA(u32),
+    FaceB(u32),
+    /// Cross product of edge `.0` of A and edge `.1` of B.
+    Edges(u32, u32),
+}
+
+/// The axis of least overlap (or greatest separation) of two convex
+/// polyhedra.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SeparatingAxis {
+    /// Unit, world frame, pointing out of B towards A.
+    pub normal: Vector3<f64>,
+    /// `min_A(n·x) − max_B(n·x)`: negative is the overlap along `normal`.
+    /// When negative it is the penetration depth (minimum translation
+    /// distance); when positive a lower bound on the distance.
+    pub separation: f64,
+    pub kind: AxisKind,
+}
+
+/// An edge axis must beat the best face axis by this fraction of the smaller
+/// polyhedron's size to be chosen: at equal overlap, face axes give stable
+/// face contacts, and parallel edge pairs only reproduce face normals.
+pub const EDGE_AXIS_REL_BIAS: f64 = 1e-6;
+
+/// Separating-axis test over the face normals of both polyhedra and the
+/// edge-edge axes that form faces of the Minkowski difference A − B
+/// (Gregorius, GDC 2013): an edge pair whose arcs on the Gauss maps of A
+/// and −B cross. Those are the only edge axes that can realise the minimum
+/// overlap, and for them the overlap is the distance between the edge lines
+/// along the axis, so the test costs O(F_A V_B + F_B V_A + E_A E_B).
+pub fn separating_axis(
+    a: &ConvexPolyhedron,
+    pose_a: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pose_b: &Isometry3<f64>,
+) -> SeparatingAxis {
+    // Everything in A's local frame.
+    let b_to_a = pose_a.inv_mul(pose_b);
+    let bv: Vec<Vector3<f64>> = b.vertices().iter().map(|v| xf(&b_to_a, v)).collect();
+    let bn: Vec<Vector3<f64>> = b
+        .faces()
+        .iter()
+        .map(|f| b_to_a.rotation * f.normal)
+        .collect();
+
+    let mut best_face = (f64::NEG_INFINITY, Vector3::zeros(), AxisKind::FaceB(0));
+    // B's faces first: ties go to B, whose face is then the reference.
+    for (j, face) in b.faces().iter().enumerate() {
+        let n = bn[j];
+        let off = n.dot(&bv[face.vertices[0]]);
+        let min_a = a
+            .vertices()
+            .iter()
+            .map(|x| n.dot(x))
+            .fold(f64::INFINITY, f64::min);
+        let sep = min_a - off;
+        if sep > best_face.0 {
+            best_face = (sep, n, AxisKind::FaceB(j as u32));
+        }
+    }
+    for (i, face) in a.faces().iter().enumerate() {
+        let m = face.normal;
+        let min_b = bv.iter().map(|y| m.dot(y)).fold(f64::INFINITY, f64::min);
+        let sep = min_b - face.offset;
+        if sep > best_face.0 {
+            best_face = (sep, -m, AxisKind::FaceA(i as u32));
+        }
+    }
+
+    let mut best_edge = (f64::NEG_INFINITY, Vector3::zeros(), AxisKind::Edges(0, 0));
+    let ca = a.centroid();
+    for (i, ea) in a.edges().iter().enumerate() {
+        let a1 = a.faces()[ea.left as usize].normal;
+        let a2 = a.faces()[ea.right as usize].normal;
+        let ua = a.edge_direction(i);
+        let pa = a.vertices()[ea.tail as usize];
+        for (j, eb) in b.edges().iter().enumerate() {
+            let b1 = -bn[eb.left as usize];
+            let b2 = -bn[eb.right as usize];
+            if !arcs_cross(&a1, &a2, &b1, &b2) {
+                continue;
+            }
+            let ub = b_to_a.rotation * b.edge_direction(j);
+            let w = ua.cross(&ub);
+            let len = w.norm();
+            // Parallel edges span no new direction: their Minkowski face is
+            // degenerate and its normal is already a face axis.
+            if len < 1e-9 {
+                continue;
+            }
+            let mut w = w / len;
+            if w.dot(&(pa - ca)) < 0.0 {
+                w = -w;
+            }
+            // w points out of A at edge i; the support of A − B along w is
+            // w·(p_a − p_b), so A and B overlap along n = −w by that much.
+            let sep = w.dot(&(bv[eb.tail as usize] - pa));
+            if sep > best_edge.0 {
+                best_edge = (sep, -w, AxisKind::Edges(i as u32, j as u32));
+            }
+        }
+    }
+    let bias = EDGE_AXIS_REL_BIAS * a.scale().min(b.scale());
+    let (separation, n, kind) = if best_edge.0 > best_face.0 + bias {
+        best_edge
+    } else {
+        best_face
+    };
+    SeparatingAxis {
+        normal: pose_a.rotation * n,
+        separation,
+        kind,
+    }
+}
+
+/// Do the great arcs a1→a2 and b1→b2 (each shorter than π) cross?
+/// b1, b2 must lie on opposite sides of the plane of arc a and a1, a2 on
+/// opposite sides of the plane of arc b; the arc-b point on circle a,
+/// r ∝ b1 |b2·n_a| + b2 |b1·n_a|, must then be the crossing on arc a
+/// rather than its antipode, i.e. lie on the side of a1 + a2.
+fn arcs_cross(a1: &Vector3<f64>, a2: &Vector3<f64>, b1: &Vector3<f64>, b2: &Vector3<f64>) -> bool {
+    let na = a1.cross(a2);
+    let nb = b1.cross(b2);
+    let (b1a, b2a) = (b1.dot(&na), b2.dot(&na));
+    let (a1b, a2b) = (a1.dot(&nb), a2.dot(&nb));
+    if b1a * b2a >= 0.0 || a1b * a2b >= 0.0 {
+        return false;
+    }
+    let mid = a1 + a2;
+    b1.dot(&mid) * b2a.abs() + b2.dot(&mid) * b1a.abs() > 0.0
+}
+
+/// The fallback: exact by exhaustion. Penetration from the separating-axis
+/// test; otherwise the minimum over vertex-face, face-vertex and edge-edge
+/// pairs, which covers every way the closest points of two convex
+/// polyhedra can lie.
+pub fn exhaustive(
+    a: &ConvexPolyhedron,
+    pose_a: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pose_b: &Isometry3<f64>,
+) -> Proximity {
+    if let Some(deep) = sat_penetration(a, pose_a, b, pose_b, 0.0) {
+        return deep;
+    }
+    let b_to_a = pose_a.inv_mul(pose_b);
+    let bv: Vec<Vector3<f64>> = b.vertices().iter().map(|v| xf(&b_to_a, v)).collect();
+    let world = |x: &Vector3<f64>| xf(pose_a, x);
+    let done = |distance, penetrating, fa, fb, pa: Vector3<f64>, pb: Vector3<f64>| Proximity {
+        distance,
+        penetrating,
+        features: FeaturePair { a: fa, b: fb },
+        point_a: world(&pa),
+        point_b: world(&pb),
+        iterations: 0,
+        fell_back: false,
+    };
+
+    let mut best = (
+        f64::INFINITY,
+        Feature::Vertex(0),
+        Feature::Vertex(0),
+        Vector3::zeros(),
+        Vector3::zeros(),
+    );
+    let mut consider = |d2: f64, fa, fb, pa, pb| {
+        if d2 < best.0 {
+            best = (d2, fa, fb, pa, pb);
+        }
+    };
+    for (i, ea) in a.edges().iter().enumerate() {
+        let (p0, p1) = (
+            a.vertices()[ea.tail as usize],
+            a.vertices()[ea.head as usize],
+        );
+        for (j, eb) in b.edges().iter().enumerate() {
+            let (pa, pb) =
+                closest_segment_points(&p0, &p1, &bv[eb.tail as usize], &bv[eb.head as usize]);
+            consider(
+                (pa - pb).norm_squared(),
+                Feature::Edge(i as u32),
+                Feature::Edge(j as u32),
+                pa,
+                pb,
+            );
+        }
+    }
+    // A vertex in a face's prism counts when above the face plane, or below
+    // it by rounding only (the test above found no overlap); deeper below, it
+    // is under the far side of that polyhedron, not near this face.
+    let below = -TOUCHING_REL_TOL * a.scale().min(b.scale());
+    let a_to_b = b_to_a.inverse();
+    for (j, face) in b.faces().iter().enumerate() {
+        for (i, x) in a.vertices().iter().enumerate() {
+            let xb = xf(&a_to_b, x);
+            let d = face.normal.dot(&xb) - face.offset;
+            if d >= below
+                && b.face_voronoi_planes(j)
+                    .iter()
+                    .all(|p| p.signed_distance(&xb) >= 0.0)
+            {
+                let pb = xf(&b_to_a, &(xb - face.normal * d));
+                consider(
+                    d * d,
+                    Feature::Vertex(i as u32),
+                    Feature::Face(j as u32),
+                    *x,
+                    pb,
+                );
+            }
+        }
+    }
+    for (i, face) in a.faces().iter().enumerate() {
+        for (j, y) in bv.iter().enumerate() {
+            let d = face.normal.dot(y) - face.offset;
+            if d >= below
+                && a.face_voronoi_planes(i)
+                    .iter()
+                    .all(|p| p.signed_distance(y) >= 0.0)
+            {
+                consider(
+                    d * d,
+                    Feature::Face(i as u32),
+                    Feature::Vertex(j as u32),
+                    y - face.normal * d,
+                    *y,
+                );
+            }
+        }
+    }
+    let (_, fa, fb, pa, pb) = best;
+    // Report the lowest-dimensional pair, so the cached warm start is the
+    // one V-Clip itself would end on.
+    let fa = lower_feature(a, fa, &pa);
+    let fb = lower_feature(b, fb, &xf(&b_to_a.inverse(), &pb));
+    done((pa - pb).norm(), false, fa, fb, pa, pb)
+}
+
+/// The separating-axis answer when A and B overlap by more than `-below`
+/// (`below` ≤ 0): depth, the deepest vertex (or edge pair) and its
+/// projection onto the other body's face (or edge).
+fn sat_penetration(
+    a: &ConvexPolyhedron,
+    pose_a: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pose_b: &Isometry3<f64>,
+    below: f64,
+) -> Option<Proximity> {
+    let sat = separating_axis(a, pose_a, b, pose_b);
+    if sat.separation >= below {
+        return None;
+    }
+    let b_to_a = pose_a.inv_mul(pose_b);
+    let bv: Vec<Vector3<f64>> = b.vertices().iter().map(|v| xf(&b_to_a, v)).collect();
+    let world = |x: &Vector3<f64>| xf(pose_a, x);
+    let done = |depth, fa, fb, pa: Vector3<f64>, pb: Vector3<f64>| Proximity {
+        distance: depth,
+        penetrating: true,
+        features: FeaturePair { a: fa, b: fb },
+        point_a: world(&pa),
+        point_b: world(&pb),
+        iterations: 0,
+        fell_back: false,
+    };
+    let n = pose_a.rotation.inverse() * sat.normal;
+    let depth = sat.separation;
+    Some(match sat.kind {
+        AxisKind::FaceB(j) => {
+            let va = a.support_index(&-n);
+            let x = a.vertices()[va];
+            done(
+                depth,
+                Feature::Vertex(va as u32),
+                Feature::Face(j),
+                x,
+                x - n * depth,
+            )
+        }
+        AxisKind::FaceA(i) => {
+            let vb = (0..bv.len())
+                .max_by(|&l, &r| bv[l].dot(&n).total_cmp(&bv[r].dot(&n)))
+                .unwrap_or(0);
+            let y = bv[vb];
+            done(
+                depth,
+                Feature::Face(i),
+                Feature::Vertex(vb as u32),
+                y + n * depth,
+                y,
+            )
+        }
+        AxisKind::Edges(i, j) => {
+            let ea = a.edges()[i as usize];
+            let eb = b.edges()[j as usize];
+            let (pa, pb) = closest_segment_points(
+                &a.vertices()[ea.tail as usize],
+                &a.vertices()[ea.head as usize],
+                &bv[eb.tail as usize],
+                &bv[eb.head as usize],
+            );
+            done(depth, Feature::Edge(i), Feature::Edge(j), pa, pb)
+        }
+    })
+}
+
+/// An edge whose witness point is one of its ends becomes that vertex.
+fn lower_feature(p: &ConvexPolyhedron, f: Feature, x: &Vector3<f64>) -> Feature {
+    if let Feature::Edge(e) = f {
+        let edge = p.edges()[e as usize];
+        for v in [edge.tail, edge.head] {
+            if (p.vertices()[v as usize] - x).norm() <= 1e-12 * p.scale() {
+                return Feature::Vertex(v);
+            }
+        }
+    }
+    f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::UnitQuaternion;
+
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn random_hull(seed: &mut u64, n: usize) -> ConvexPolyhedron {
+        let pts: Vec<Vector3<f64>> = (0..n)
+            .map(|_| Vector3::new(lcg(seed) - 0.5, lcg(seed) - 0.5, lcg(seed) - 0.5))
+            .collect();
+        ConvexPolyhedron::hull(&pts).unwrap()
+    }
+
+    fn random_pose(seed: &mut u64, spread: f64) -> Isometry3<f64> {
+        let axis = Vector3::new(lcg(seed) - 0.5, lcg(seed) - 0.5, lcg(seed) - 0.5);
+        let rot = UnitQuaternion::from_scaled_axis(axis * 6.0);
+        let t = Vector3::new(lcg(seed) - 0.5, lcg(seed) - 0.5, lcg(seed) - 0.5) * spread;
+        Isometry3::from_parts(t.into(), rot)
+    }
+
+    /// All edge pairs, with supports computed in full, against the pruned test.
+    #[test]
+    fn minkowski_pruned_sat_matches_full_sat() {
+        let mut seed = 7;
+        for _ in 0..200 {
+            let a = random_hull(&mut seed, 12);
+            let b = random_hull(&mut seed, 12);
+            let pa = random_pose(&mut seed, 1.0);
+            let pb = random_pose(&mut seed, 1.0);
+            let sat = separating_axis(&a, &pa, &b, &pb);
+            let av: Vec<_> = a.vertices().iter().map(|v| xf(&pa, v)).collect();
+            let bv: Vec<_> = b.vertices().iter().map(|v| xf(&pb, v)).collect();
+            let sep = |n: Vector3<f64>| {
+                let min_a = av.iter().map(|x| n.dot(x)).fold(f64::INFINITY, f64::min);
+                let max_b = bv
+                    .iter()
+                    .map(|x| n.dot(x))
+                    .fold(f64::NEG_INFINITY, f64::max);
+                min_a - max_b
+            };
+            let mut full = f64::NEG_INFINITY;
+            for f in a.faces() {
+                full = full.max(sep(-(pa.rotation * f.normal)));
+            }
+            for f in b.faces() {
+                full = full.max(sep(pb.rotation * f.normal));
+            }
+            for (i, _) in a.edges().iter().enumerate() {
+                for (j, _) in b.edges().iter().enumerate() {
+                    let w = (pa.rotation * a.edge_direction(i))
+                        .cross(&(pb.rotation * b.edge_direction(j)));
+                    if w.norm() > 1e-9 {
+                        let w = w.normalize();
+                        full = full.max(sep(w)).max(sep(-w));
+                    }
+                }
+            }
+            if full < 0.0 {
+                // Overlapping: the pruned test finds the same least overlap.
+                assert!(
+                    (sat.separation - full).abs() < 1e-9,
+                    "{} vs {}",
+                    sat.separation,
+                    full
+                );
+            } else {
+                assert!(sat.separation <= full + 1e-9 && sat.separation > 0.0);
+            }
+            assert!((sep(sat.normal) - sat.separation).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn segments_closest_points_cover_parallel_and_degenerate_cases() {
+        let z = Vector3::zeros();
+        let x = Vector3::x();
+        let (p, q) = closest_segment_points(
+            &z,
+            &x,
+            &Vector3::new(0.5, 1.0, 0.0),
+            &Vector3::new(2.0, 1.0, 0.0),
+        );
+        assert!(((p - q).norm() - 1.0).abs() < 1e-15);
+        let (p, q) = closest_segment_points(
+            &z,
+            &z,
+            &Vector3::new(0.5, 1.0, 0.0),
+            &Vector3::new(0.5, 1.0, 0.0),
+        );
+        assert_eq!((p, q), (z, Vector3::new(0.5, 1.0, 0.0)));
+        let (p, q) = closest_segment_points(
+            &z,
+            &x,
+            &Vector3::new(3.0, 0.0, 1.0),
+            &Vector3::new(3.0, 0.0, 2.0),
+        );
+        assert_eq!((p, q), (x, Vector3::new(3.0, 0.0, 1.0)));
+    }
+}

@@ -1,0 +1,6 @@
+//! Contact systems and their impulses and forces (SPEC 2.4): islands, the
+//! LCP rows of an island, and Dantzig's algorithm. No MPI in here.
+
+pub mod island;
+pub mod lcp;
+pub mod solver;

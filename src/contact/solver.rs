@@ -1,0 +1,401 @@
+//! Contact impulses and forces of one island (SPEC 2.4), as a pure function
+//! over plain data so any rank can solve any island.
+//!
+//! Each contact i between bodies A and B at point P with unit normal n (out of
+//! B towards A) contributes a normal row and, where μ > 0, two friction rows.
+//! A row with direction d has Jacobian J = [d, r_A×d | −d, −r_B×d] and the
+//! LCP matrix is A = J M⁻¹ Jᵀ (effect of a unit impulse on row j upon the
+//! relative velocity of row i).
+//!
+//! Two solves per island and step:
+//! 1. **Impact** (instantaneous): only when some contact approaches. Normal
+//!    rows: V' = A p + V with V = (1+ε)v_N for a collision faster than the
+//!    threshold g·dt/2 (SPEC 2.6: slower ones converge to contact, ε = 0), the
+//!    LCP V' ≥ 0, p ≥ 0, pᵀV' = 0 (SPEC eq. 3.15). Friction rows stop the
+//!    tangential motion with |p_t| ≤ μ p_N.
+//! 2. **Resting forces** over the step: the same LCP on the velocities the
+//!    bodies would have at the end of the step without contact (v + h·F/m), so
+//!    the contact force F = p/h keeps every contact from approaching by the end
+//!    of the step. A body at rest gets exactly its weight back; stacks carry
+//!    k·m·g under the k-th body. Friction rows target zero tangential velocity
+//!    at the end of the step, bounded by ±μ F_N: a sliding body hits the bound
+//!    (kinetic friction), a slow one is stopped (static).
+//!
+//! The first friction direction is the slip direction (or, at rest, the
+//! direction the external forces push), so kinetic friction is exactly
+//! opposite the slip and isotropic; the second direction is perpendicular.
+
+use super::lcp;
+use crate::body::BodyId;
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Contacts approaching slower than this (m/s) need no impact solve.
+const APPROACH_EPS: f64 = 1e-9;
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct IslandBody {
+    pub id: BodyId,
+    pub inv_mass: f64,
+    /// World inverse inertia (zero for fixed and driven bodies).
+    pub inv_inertia: Matrix3<f64>,
+    pub position: Vector3<f64>,
+    pub velocity: Vector3<f64>,
+    pub angular_velocity: Vector3<f64>,
+    /// Velocity change the external forces give over the step (a·h, α·h).
+    pub external_dv: Vector3<f64>,
+    pub external_dw: Vector3<f64>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct IslandContact {
+    /// Indices into `IslandTask::bodies`.
+    pub a: u32,
+    pub b: u32,
+    pub point: Vector3<f64>,
+    /// Unit normal out of B towards A.
+    pub normal: Vector3<f64>,
+    pub restitution: f64,
+    pub friction: f64,
+}
+
+/// Contact request for one system (SPEC 3.4).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct IslandTask {
+    pub bodies: Vec<IslandBody>,
+    pub contacts: Vec<IslandContact>,
+    pub dt: f64,
+    /// Collisions slower than this converge to contact (ε = 0): g·dt/2.
+    pub restitution_threshold: f64,
+}
+
+/// Contact reply: per body (same order as the task), the impulse applied at
+/// the start of the step and the constant contact force over the step.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct IslandResult {
+    pub impulse: Vec<Vector3<f64>>,
+    pub angular_impulse: Vec<Vector3<f64>>,
+    pub force: Vec<Vector3<f64>>,
+    pub torque: Vec<Vector3<f64>>,
+    /// Total normal impulse of the impact solve and of the resting solve (×h).
+    pub normal_impulse_sum: f64,
+    pub normal_force_sum: f64,
+    pub stats: SolveStats,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct SolveStats {
+    pub lcp_solves: u32,
+    pub closed_form_solves: u32,
+    pub skipped_solves: u32,
+    pub rows: u32,
+    pub friction_rows: u32,
+    pub pivots: u64,
+    /// Solves that failed and fell back to projected Gauss–Seidel (sizes listed).
+    pub failures: Vec<(u32, String)>,
+}
+
+impl SolveStats {
+    pub fn add(&mut self, o: &SolveStats) {
+        self.lcp_solves += o.lcp_solves;
+        self.closed_form_solves += o.closed_form_solves;
+        self.skipped_solves += o.skipped_solves;
+        self.rows += o.rows;
+        self.friction_rows += o.friction_rows;
+        self.pivots += o.pivots;
+        self.failures.extend(o.failures.iter().cloned());
+    }
+}
+
+/// One LCP row: direction d at contact `contact`, with M⁻¹Jᵀ precomputed.
+struct Row {
+    a: usize,
+    b: usize,
+    lin: Vector3<f64>,
+    ang_a: Vector3<f64>,
+    ang_b: Vector3<f64>,
+    /// M⁻¹Jᵀ: velocity change of A and B per unit impulse on this row.
+    dva: Vector3<f64>,
+    dwa: Vector3<f64>,
+    dvb: Vector3<f64>,
+    dwb: Vector3<f64>,
+}
+
+impl Row {
+    fn new(
+        bodies: &[IslandBody],
+        a: usize,
+        b: usize,
+        point: &Vector3<f64>,
+        d: Vector3<f64>,
+    ) -> Row {
+        let (ba, bb) = (&bodies[a], &bodies[b]);
+        let ang_a = (point - ba.position).cross(&d);
+        let ang_b = -(point - bb.position).cross(&d);
+        Row {
+            a,
+            b,
+            lin: d,
+            ang_a,
+            ang_b,
+            dva: d * ba.inv_mass,
+            dwa: ba.inv_inertia * ang_a,
+            dvb: -d * bb.inv_mass,
+            dwb: bb.inv_inertia * ang_b,
+        }
+    }
+
+    /// Relative velocity along the row: J·v.
+    fn velocity(&self, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> f64 {
+        self.lin.dot(&v[self.a]) + self.ang_a.dot(&w[self.a]) - self.lin.dot(&v[self.b])
+            + self.ang_b.dot(&w[self.b])
+    }
+
+    /// J_self · (M⁻¹ J_other ᵀ).
+    fn coupling(&self, other: &Row) -> f64 {
+        let mut s = 0.0;
+        for (body, lin, ang) in [
+            (self.a, self.lin, self.ang_a),
+            (self.b, -self.lin, self.ang_b),
+        ] {
+            if body == other.a {
+                s += lin.dot(&other.dva) + ang.dot(&other.dwa);
+            }
+            if body == other.b {
+                s += lin.dot(&other.dvb) + ang.dot(&other.dwb);
+            }
+        }
+        s
+    }
+}
+
+/// Which velocities a solve targets.
+#[derive(Clone, Copy, PartialEq)]
+enum Phase {
+    Impact,
+    Resting,
+}
+
+/// Solves one island: impact impulses, then resting forces.
+pub fn solve_island(task: &IslandTask) -> IslandResult {
+    let n = task.bodies.len();
+    let mut out = IslandResult {
+        impulse: vec![Vector3::zeros(); n],
+        angular_impulse: vec![Vector3::zeros(); n],
+        force: vec![Vector3::zeros(); n],
+        torque: vec![Vector3::zeros(); n],
+        ..Default::default()
+    };
+    let mut v: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.velocity).collect();
+    let mut w: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.angular_velocity).collect();
+
+    // 1. Impact.
+    let approaching = task.contacts.iter().any(|c| {
+        let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
+        row.velocity(&v, &w) < -APPROACH_EPS
+    });
+    if approaching {
+        let (rows, p, sum) = solve_phase(task, &v, &w, Phase::Impact, &mut out.stats);
+        out.normal_impulse_sum = sum;
+        for (row, &pi) in rows.iter().zip(&p) {
+            apply(row, pi, &mut out.impulse, &mut out.angular_impulse);
+            v[row.a] += row.dva * pi;
+            w[row.a] += row.dwa * pi;
+            v[row.b] += row.dvb * pi;
+            w[row.b] += row.dwb * pi;
+        }
+    }
+
+    // 2. Resting forces on the end-of-step velocities.
+    let vf: Vec<Vector3<f64>> = v
+        .iter()
+        .zip(&task.bodies)
+        .map(|(v, b)| v + b.external_dv)
+        .collect();
+    let wf: Vec<Vector3<f64>> = w
+        .iter()
+        .zip(&task.bodies)
+        .map(|(w, b)| w + b.external_dw)
+        .collect();
+    let needed = task.contacts.iter().any(|c| {
+        let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
+        row.velocity(&vf, &wf) < 0.0
+    });
+    if needed {
+        let (rows, p, sum) = solve_phase(task, &vf, &wf, Phase::Resting, &mut out.stats);
+        out.normal_force_sum = sum / task.dt;
+        for (row, &pi) in rows.iter().zip(&p) {
+            apply(row, pi / task.dt, &mut out.force, &mut out.torque);
+        }
+    } else {
+        out.stats.skipped_solves += 1;
+    }
+    out
+}
+
+fn apply(row: &Row, p: f64, lin: &mut [Vector3<f64>], ang: &mut [Vector3<f64>]) {
+    lin[row.a] += row.lin * p;
+    ang[row.a] += row.ang_a * p;
+    lin[row.b] -= row.lin * p;
+    ang[row.b] += row.ang_b * p;
+}
+
+/// Builds and solves the LCP of one phase. Returns the rows, their impulses
+/// and the sum of the normal impulses.
+fn solve_phase(
+    task: &IslandTask,
+    v: &[Vector3<f64>],
+    w: &[Vector3<f64>],
+    phase: Phase,
+    stats: &mut SolveStats,
+) -> (Vec<Row>, Vec<f64>, f64) {
+    let mut rows = Vec::new();
+    let mut rhs = Vec::new();
+    let mut lo = Vec::new();
+    let mut hi = Vec::new();
+    let mut findex = Vec::new();
+    for c in &task.contacts {
+        let (a, b) = (c.a as usize, c.b as usize);
+        let normal = Row::new(&task.bodies, a, b, &c.point, c.normal);
+        let vn = normal.velocity(v, w);
+        let b_n = if phase == Phase::Impact && vn < -task.restitution_threshold {
+            (1.0 + c.restitution) * vn
+        } else {
+            vn
+        };
+        let ni = rows.len();
+        rows.push(normal);
+        rhs.push(b_n);
+        lo.push(0.0);
+        hi.push(f64::INFINITY);
+        findex.push(None);
+        if c.friction > 0.0 {
+            let t1 = friction_direction(task, c, v, w);
+            let t2 = c.normal.cross(&t1);
+            for t in [t1, t2] {
+                let row = Row::new(&task.bodies, a, b, &c.point, t);
+                rhs.push(row.velocity(v, w));
+                rows.push(row);
+                // Friction bounds are coefficients of the normal impulse: |p_t| ≤ μ p_N.
+                lo.push(-c.friction);
+                hi.push(c.friction);
+                findex.push(Some(ni));
+                stats.friction_rows += 1;
+            }
+        }
+    }
+    let m = rows.len();
+    stats.rows += m as u32;
+    let normal_sum = |p: &[f64]| {
+        p.iter()
+            .zip(&findex)
+            .filter(|(_, f)| f.is_none())
+            .map(|(x, _)| x)
+            .sum()
+    };
+
+    // Single frictionless contact: closed form (SPEC eq. 3.17), no solver.
+    if m == 1 {
+        stats.closed_form_solves += 1;
+        let a00 = rows[0].coupling(&rows[0]);
+        let p = if a00 > 0.0 {
+            (-rhs[0] / a00).max(0.0)
+        } else {
+            0.0
+        };
+        return (rows, vec![p], p);
+    }
+
+    let mut a = vec![0.0; m * m];
+    for i in 0..m {
+        for j in 0..m {
+            a[i * m + j] = rows[i].coupling(&rows[j]);
+        }
+    }
+    stats.lcp_solves += 1;
+    let problem = lcp::LcpProblem {
+        a: &a,
+        b: &rhs,
+        lo: &lo,
+        hi: &hi,
+        findex: &findex,
+    };
+    let p = match lcp::solve(&problem) {
+        Ok(sol) => {
+            stats.pivots += sol.pivots as u64;
+            sol.x
+        }
+        Err(e) => {
+            stats.failures.push((m as u32, e.to_string()));
+            projected_gauss_seidel(&a, m, &rhs, &lo, &hi, &findex)
+        }
+    };
+    let sum = normal_sum(&p);
+    (rows, p, sum)
+}
+
+/// Slip direction at the contact, or where external forces push when at rest.
+fn friction_direction(
+    task: &IslandTask,
+    c: &IslandContact,
+    v: &[Vector3<f64>],
+    w: &[Vector3<f64>],
+) -> Vector3<f64> {
+    let n = c.normal;
+    let (a, b) = (c.a as usize, c.b as usize);
+    let (ba, bb) = (&task.bodies[a], &task.bodies[b]);
+    let rel = |va: &Vector3<f64>, wa: &Vector3<f64>, vb: &Vector3<f64>, wb: &Vector3<f64>| {
+        (va + wa.cross(&(c.point - ba.position))) - (vb + wb.cross(&(c.point - bb.position)))
+    };
+    let vel = rel(&v[a], &w[a], &v[b], &w[b]);
+    let slip = vel - n * n.dot(&vel);
+    if slip.norm() > 1e-9 {
+        return slip.normalize();
+    }
+    let push = rel(
+        &ba.external_dv,
+        &ba.external_dw,
+        &bb.external_dv,
+        &bb.external_dw,
+    );
+    let push = push - n * n.dot(&push);
+    if push.norm() > 1e-12 {
+        return push.normalize();
+    }
+    // Any tangent, chosen deterministically from the normal.
+    let helper = if n.x.abs() < 0.6 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    (helper - n * n.dot(&helper)).normalize()
+}
+
+/// Fallback when pivoting fails: projected Gauss–Seidel on the boxed LCP.
+/// Converges for positive semidefinite A; used only after a reported failure.
+pub fn projected_gauss_seidel(
+    a: &[f64],
+    m: usize,
+    b: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    findex: &[Option<usize>],
+) -> Vec<f64> {
+    let mut x = vec![0.0; m];
+    for _ in 0..200 {
+        for i in 0..m {
+            let aii = a[i * m + i];
+            if aii <= 1e-300 {
+                continue;
+            }
+            let r: f64 = b[i] + (0..m).map(|j| a[i * m + j] * x[j]).sum::<f64>();
+            let mut xi = x[i] - r / aii;
+            xi = match findex[i] {
+                None => xi.clamp(lo[i], hi[i]),
+                Some(k) => xi.clamp(lo[i] * x[k].abs(), hi[i] * x[k].abs()),
+            };
+            x[i] = if xi.is_finite() { xi } else { 0.0 };
+        }
+    }
+    x
+}

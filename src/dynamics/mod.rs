@@ -1,0 +1,3 @@
+//! Dynamics: integration, the contact phase and the world step.
+
+pub mod integrate;

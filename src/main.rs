@@ -1,0 +1,179 @@
+//! `rigidsim SCENE.toml [options]`, alone or under `mpirun -np N`.
+//!
+//! Exit status: 0 done, 2 bad input (scene, mesh, options), 3 the run went
+//! numerically wrong (outputs written so far are kept), 1 anything else.
+
+use clap::Parser;
+use mpi::topology::Communicator;
+use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
+use rigidsim::run::{self, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunError, RunOptions};
+use rigidsim::step::{Executor, Inline};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(version, about = "Rigid-body dynamics over an MPI cluster of lab PCs")]
+struct Cli {
+    /// Scene file (TOML).
+    scene: PathBuf,
+    /// Output folder (default out/<scene name>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Simulated seconds to run (overrides world.duration).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Base time step in seconds (overrides world.dt).
+    #[arg(long)]
+    dt: Option<f64>,
+    /// Trajectory sampling interval in simulated seconds.
+    #[arg(long)]
+    sample_every: Option<f64>,
+    /// Do not render, even if the scene has a [render] section.
+    #[arg(long)]
+    no_render: bool,
+    /// No progress bar or progress lines.
+    #[arg(long)]
+    no_progress: bool,
+    /// Never put resting systems to sleep (costs time; for measurements).
+    #[arg(long)]
+    no_sleep: bool,
+    /// Test aid: make rank R take F times longer per task, e.g. --slow-rank 2=3.0.
+    #[arg(long, value_parser = parse_slow)]
+    slow_rank: Vec<(i32, f64)>,
+    /// Distribute every stage whatever its size (tests of determinism and balance).
+    #[arg(long)]
+    force_distribute: bool,
+}
+
+fn parse_slow(s: &str) -> Result<(i32, f64), String> {
+    let (r, f) = s
+        .split_once('=')
+        .ok_or("expected RANK=FACTOR, e.g. 2=3.0")?;
+    let r: i32 = r.trim().parse().map_err(|_| format!("bad rank '{r}'"))?;
+    let f: f64 = f.trim().parse().map_err(|_| format!("bad factor '{f}'"))?;
+    if r < 0 || !f.is_finite() || f < 1.0 {
+        return Err("rank must be ≥ 0 and factor ≥ 1".into());
+    }
+    Ok((r, f))
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() { 2 } else { 0 };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    let Some(universe) = mpi::initialize() else {
+        eprintln!("rigidsim: MPI could not be initialised");
+        return ExitCode::from(1);
+    };
+    let world = universe.world();
+    let rank = world.rank();
+    let size = world.size();
+    let say = |msg: &str| {
+        if rank == 0 {
+            eprintln!("rigidsim: {msg}");
+        }
+    };
+
+    // Every rank loads the scene itself; they all fail alike on bad input,
+    // and only rank 0 says so.
+    let opts = RunOptions {
+        out_dir: cli.out.clone(),
+        duration: cli.duration,
+        dt: cli.dt,
+        sample_every: cli.sample_every,
+        no_render: cli.no_render,
+        no_progress: cli.no_progress,
+        no_sleep: cli.no_sleep,
+    };
+    let mut scene = match rigidsim::scene::load(&cli.scene) {
+        Ok(s) => s,
+        Err(e) => {
+            say(&format!("error: {e}"));
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = run::apply_overrides(&mut scene, &opts) {
+        say(&format!("error: {e}"));
+        return ExitCode::from(2);
+    }
+    let out_dir = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| run::default_out_dir(&scene));
+    let roles = Roles::new(size, scene.settings.render.is_some());
+
+    if rank != 0 {
+        if Some(rank) == roles.renderer {
+            cluster::renderer_loop(&world, &scene, &out_dir);
+        } else {
+            cluster::worker_loop(&world, &scene, cluster::slow_factor(&cli.slow_rank, rank));
+        }
+        return ExitCode::SUCCESS;
+    }
+
+    let mut inline = Inline::default();
+    let mut mpi_exec;
+    let exec: &mut dyn Executor = if roles.workers.is_empty() {
+        &mut inline
+    } else {
+        mpi_exec = MpiExecutor::new(&world, roles.clone(), &scene.objects);
+        mpi_exec.force_distribute = cli.force_distribute;
+        &mut mpi_exec
+    };
+    let mut no_frames = NoFrames;
+    let mut remote;
+    let mut local;
+    let frames: &mut dyn FrameSink = match (scene.settings.render.is_some(), roles.renderer) {
+        (false, _) => &mut no_frames,
+        (true, Some(r)) => {
+            remote = RemoteFrames::new(&world, r);
+            &mut remote
+        }
+        (true, None) => {
+            if let Err(e) = std::fs::create_dir_all(&out_dir) {
+                say(&format!("error: cannot create {}: {e}", out_dir.display()));
+                return ExitCode::from(1);
+            }
+            match FrameRenderer::new(&scene, &out_dir) {
+                Ok(r) => {
+                    local = InlineFrames(r);
+                    &mut local
+                }
+                Err(e) => {
+                    say(&format!("warning: {e}; continuing without frames"));
+                    &mut no_frames
+                }
+            }
+        }
+    };
+    match run::run_coordinator(scene, &opts, &out_dir, exec, frames) {
+        Ok(summary) => {
+            eprintln!(
+                "rigidsim: {} bodies, {:.3} s simulated in {:.3} s ({:.2}x real time), ended by {}; results in {}",
+                summary.bodies,
+                summary.sim_time_s,
+                summary.wall_time_s,
+                summary.realtime_factor,
+                summary.end_reason,
+                out_dir.display()
+            );
+            ExitCode::SUCCESS
+        }
+        Err(RunError::Failed(msg)) => {
+            eprintln!(
+                "rigidsim: error: {msg}; outputs so far kept in {}",
+                out_dir.display()
+            );
+            ExitCode::from(3)
+        }
+        Err(RunError::Io(msg)) => {
+            eprintln!("rigidsim: error: {msg}");
+            world.abort(1);
+        }
+    }
+}

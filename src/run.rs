@@ -1,0 +1,450 @@
+//! One run of a scene on the coordinator (rank 0, or the only rank): the
+//! frame loop around `World::step`, trajectory sampling, progress, frames
+//! for the renderer, and the summary.
+
+use crate::body::{Activity, BodyKind};
+use crate::output::progress::Progress;
+use crate::output::summary::{RankSummary, Summary};
+use crate::output::trajectory::TrajectoryWriter;
+use crate::output::write_atomic;
+use crate::render;
+use crate::scene::Scene;
+use crate::step::{Executor, World};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Command-line choices that change a run.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    pub out_dir: Option<PathBuf>,
+    pub duration: Option<f64>,
+    pub dt: Option<f64>,
+    pub sample_every: Option<f64>,
+    pub no_render: bool,
+    pub no_progress: bool,
+    pub no_sleep: bool,
+}
+
+/// Applies command-line overrides to a loaded scene.
+pub fn apply_overrides(scene: &mut Scene, opts: &RunOptions) -> Result<(), String> {
+    if let Some(d) = opts.duration {
+        if !d.is_finite() || d < 0.0 {
+            return Err(format!("--duration must be a finite number ≥ 0 (got {d})"));
+        }
+        scene.settings.duration = Some(d);
+    }
+    if let Some(dt) = opts.dt {
+        if !dt.is_finite() || dt <= 0.0 || dt > 1.0 {
+            return Err(format!("--dt must be in (0, 1] s (got {dt})"));
+        }
+        scene.settings.dt = dt;
+    }
+    if let Some(s) = opts.sample_every {
+        if !s.is_finite() || s <= 0.0 {
+            return Err(format!("--sample-every must be positive (got {s})"));
+        }
+        scene.settings.sample_every = Some(s);
+    }
+    if opts.no_render {
+        scene.settings.render = None;
+    }
+    Ok(())
+}
+
+pub fn default_out_dir(scene: &Scene) -> PathBuf {
+    Path::new("out").join(&scene.name)
+}
+
+/// One body's pose as the renderer needs it (render message, SPEC 3.4).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct Pose {
+    pub position: [f32; 3],
+    pub orientation: [f32; 4],
+}
+
+/// A frame of poses for the renderer.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Frame {
+    pub index: u64,
+    pub time: f64,
+    pub poses: Vec<Pose>,
+}
+
+pub fn frame_of(world: &World, index: u64) -> Frame {
+    Frame {
+        index,
+        time: world.time(),
+        poses: world
+            .bodies
+            .iter()
+            .map(|b| {
+                let p = b.state.position;
+                let q = b.state.orientation;
+                Pose {
+                    position: [p.x as f32, p.y as f32, p.z as f32],
+                    orientation: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+                }
+            })
+            .collect(),
+    }
+}
+
+/// Where frames go: nowhere, a renderer on this rank, or the render rank.
+pub trait FrameSink {
+    fn publish(&mut self, frame: Frame);
+    /// Ends the stream; returns (frames rendered, frames dropped, adapter, notes).
+    fn finish(&mut self, last: Frame) -> (u64, u64, Option<String>, Vec<String>);
+    /// The render rank's line in `per_rank`, when frames go to another rank.
+    fn rank_summary(&self) -> Option<RankSummary> {
+        None
+    }
+}
+
+pub struct NoFrames;
+
+impl FrameSink for NoFrames {
+    fn publish(&mut self, _frame: Frame) {}
+    fn finish(&mut self, _last: Frame) -> (u64, u64, Option<String>, Vec<String>) {
+        (0, 0, None, Vec::new())
+    }
+}
+
+/// Draws frames: used by the render rank, and inline on a single rank.
+pub struct FrameRenderer {
+    renderer: render::Renderer,
+    camera: render::Camera,
+    instances: Vec<render::Instance>,
+    dir: PathBuf,
+    video: Option<render::VideoWriter>,
+    pub rendered: u64,
+    pub notes: Vec<String>,
+}
+
+impl FrameRenderer {
+    pub fn new(scene: &Scene, out_dir: &Path) -> Result<FrameRenderer, String> {
+        let settings = scene
+            .settings
+            .render
+            .as_ref()
+            .ok_or("the scene has no [render] section")?;
+        let meshes: Vec<render::Mesh> = scene
+            .objects
+            .iter()
+            .map(|o| {
+                let mut positions = Vec::new();
+                let mut indices = Vec::new();
+                for p in &o.parts {
+                    let base = positions.len() as u32;
+                    positions.extend(
+                        p.hull
+                            .vertices()
+                            .iter()
+                            .map(|v| [v.x as f32, v.y as f32, v.z as f32]),
+                    );
+                    for t in p.hull.triangles() {
+                        indices.extend(t.iter().map(|&i| base + i as u32));
+                    }
+                }
+                render::Mesh { positions, indices }
+            })
+            .collect();
+        let renderer = render::Renderer::new(settings.size[0], settings.size[1], meshes)
+            .map_err(|e| e.to_string())?;
+        let instances: Vec<render::Instance> = scene
+            .bodies
+            .iter()
+            .map(|b| render::Instance {
+                mesh: b.object.0 as usize,
+                rotation: [1.0, 0.0, 0.0, 0.0],
+                translation: [0.0; 3],
+                color: scene.objects[b.object.0 as usize].color,
+                fixed: matches!(b.kind, BodyKind::Fixed),
+            })
+            .collect();
+        let camera = match (settings.eye, settings.target) {
+            (Some(e), Some(t)) => {
+                let mut c = render::Camera::looking_at(
+                    [e.x as f32, e.y as f32, e.z as f32],
+                    [t.x as f32, t.y as f32, t.z as f32],
+                );
+                c.fov_y_deg = settings.fov_y_deg as f32;
+                c
+            }
+            _ => {
+                let points: Vec<[f32; 3]> = scene
+                    .bodies
+                    .iter()
+                    .flat_map(|b| {
+                        let o = &scene.objects[b.object.0 as usize];
+                        o.spheres.iter().flat_map(move |s| {
+                            let c = b.state.position + b.state.orientation * s.center;
+                            let r = s.radius;
+                            [
+                                [(c.x - r) as f32, (c.y - r) as f32, (c.z - r) as f32],
+                                [(c.x + r) as f32, (c.y + r) as f32, (c.z + r) as f32],
+                            ]
+                        })
+                    })
+                    .collect();
+                render::look_at_scene(&points)
+            }
+        };
+        let dir = out_dir.join("frames");
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        let mut notes = Vec::new();
+        let fps = settings.video_fps.round().max(1.0) as u32;
+        let video = render::VideoWriter::start(
+            out_dir.join("video.mp4"),
+            settings.size[0],
+            settings.size[1],
+            fps,
+        )
+        .map_err(|e| e.to_string())?;
+        if video.is_none() {
+            let note = "ffmpeg not found: no video.mp4, frames kept as PNG".to_string();
+            eprintln!("rigidsim: {note}");
+            notes.push(note);
+        }
+        Ok(FrameRenderer {
+            renderer,
+            camera,
+            instances,
+            dir,
+            video,
+            rendered: 0,
+            notes,
+        })
+    }
+
+    pub fn adapter(&self) -> String {
+        self.renderer.adapter_info()
+    }
+
+    pub fn draw(&mut self, frame: &Frame) -> Result<render::Image, String> {
+        for (inst, pose) in self.instances.iter_mut().zip(&frame.poses) {
+            inst.translation = pose.position;
+            inst.rotation = pose.orientation;
+        }
+        self.renderer
+            .render(&self.camera, &self.instances)
+            .map_err(|e| e.to_string())
+    }
+
+    pub fn render_frame(&mut self, frame: &Frame) -> Result<(), String> {
+        let image = self.draw(frame)?;
+        let path = self.dir.join(format!("frame_{:05}.png", frame.index));
+        render::write_png(&path, &image).map_err(|e| e.to_string())?;
+        if let Some(v) = self.video.as_mut() {
+            v.push(&image).map_err(|e| e.to_string())?;
+        }
+        self.rendered += 1;
+        Ok(())
+    }
+
+    /// Writes `preview.png` of the final state and closes the video.
+    pub fn finish(&mut self, last: &Frame) -> Result<(), String> {
+        let image = self.draw(last)?;
+        let preview = self
+            .dir
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("preview.png");
+        render::write_png(&preview, &image).map_err(|e| e.to_string())?;
+        if let Some(v) = self.video.take() {
+            v.finish().map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    }
+}
+
+/// Renders on this rank after each frame (one rank with rendering on).
+pub struct InlineFrames(pub FrameRenderer);
+
+impl FrameSink for InlineFrames {
+    fn publish(&mut self, frame: Frame) {
+        if let Err(e) = self.0.render_frame(&frame) {
+            self.0
+                .notes
+                .push(format!("frame {} not rendered: {e}", frame.index));
+        }
+    }
+    fn finish(&mut self, last: Frame) -> (u64, u64, Option<String>, Vec<String>) {
+        if let Err(e) = self.0.finish(&last) {
+            self.0.notes.push(format!("preview not rendered: {e}"));
+        }
+        (
+            self.0.rendered,
+            0,
+            Some(self.0.adapter()),
+            self.0.notes.clone(),
+        )
+    }
+}
+
+/// Why a run stopped early.
+#[derive(Debug)]
+pub enum RunError {
+    Io(String),
+    /// Numerical failure: the summary was written with `end_reason = "failed"`.
+    Failed(String),
+}
+
+/// Runs the frame loop on the coordinator and writes every output.
+pub fn run_coordinator(
+    scene: Scene,
+    opts: &RunOptions,
+    out_dir: &Path,
+    exec: &mut dyn Executor,
+    frames: &mut dyn FrameSink,
+) -> Result<Summary, RunError> {
+    let io = |e: std::io::Error, what: &str| RunError::Io(format!("{what}: {e}"));
+    std::fs::create_dir_all(out_dir)
+        .map_err(|e| io(e, &format!("cannot create {}", out_dir.display())))?;
+    // A summary left by an earlier run would make this folder look complete.
+    let summary_path = out_dir.join("summary.json");
+    let _ = std::fs::remove_file(&summary_path);
+    let mut traj = TrajectoryWriter::create(&out_dir.join("trajectory.csv"))
+        .map_err(|e| io(e, "trajectory.csv"))?;
+
+    let settings = scene.settings.clone();
+    let mut world = World::new(scene);
+    world.sleep_enabled = !opts.no_sleep;
+    let dt = settings.dt;
+    let end_time = settings.end_time();
+    let total_steps = (end_time / dt - 1e-9).ceil().max(0.0) as u64;
+    let sample_every = settings.sample_every.unwrap_or(dt);
+    let sample_stride = ((sample_every / dt).round() as u64).max(1);
+    let frame_stride = ((settings.frame_interval / dt).round() as u64).max(1);
+    let render_stride = settings
+        .render
+        .as_ref()
+        .map(|r| ((r.every / dt).round() as u64).max(1));
+
+    let energy_initial = world.energy();
+    let mut progress = Progress::new(!opts.no_progress, end_time, &world.scene.name);
+    let started = Instant::now();
+    let mut frame_started = Instant::now();
+    let mut worst_frame: f64 = 0.0;
+    let mut frame_index = 0u64;
+    traj.sample(0.0, &world.bodies, &world.scene.objects)
+        .map_err(|e| io(e, "trajectory.csv"))?;
+    if render_stride.is_some() {
+        let clock = Instant::now();
+        frames.publish(frame_of(&world, frame_index));
+        frame_index += 1;
+        world.stage.render += clock.elapsed().as_secs_f64();
+    }
+
+    let mut end_reason = "duration";
+    let mut failure = None;
+    while world.steps < total_steps {
+        if settings.until_rest && world.steps > 0 && world.at_rest() {
+            end_reason = "rest";
+            break;
+        }
+        if let Err(f) = world.step(exec) {
+            failure = Some(f.to_string());
+            break;
+        }
+        let s = world.steps;
+        if s % sample_stride == 0 || s == total_steps {
+            traj.sample(world.time(), &world.bodies, &world.scene.objects)
+                .map_err(|e| io(e, "trajectory.csv"))?;
+        }
+        if let Some(stride) = render_stride {
+            if s % stride == 0 {
+                let clock = Instant::now();
+                frames.publish(frame_of(&world, frame_index));
+                frame_index += 1;
+                world.stage.render += clock.elapsed().as_secs_f64();
+            }
+        }
+        if s % frame_stride == 0 {
+            worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
+            frame_started = Instant::now();
+            let awake = world
+                .bodies
+                .iter()
+                .filter(|b| b.activity == Activity::Awake && b.is_dynamic())
+                .count();
+            progress.update(world.time(), awake, world.bodies.len());
+        }
+    }
+    if failure.is_none() && end_reason == "duration" && settings.until_rest && world.at_rest() {
+        end_reason = "rest";
+    }
+    if world.steps % frame_stride != 0 {
+        // The last, partial frame.
+        worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
+    }
+    progress.finish();
+    // The end row (if the last step was not a sample).
+    traj.sample(world.time(), &world.bodies, &world.scene.objects)
+        .map_err(|e| io(e, "trajectory.csv"))?;
+    traj.flush().map_err(|e| io(e, "trajectory.csv"))?;
+    let clock = Instant::now();
+    let (frames_rendered, frames_dropped, adapter, mut notes) = if render_stride.is_some() {
+        frames.finish(frame_of(&world, frame_index))
+    } else {
+        (0, 0, None, Vec::new())
+    };
+    world.stage.render += clock.elapsed().as_secs_f64();
+    let (mut per_rank, distributed) = exec.finish();
+    per_rank.extend(frames.rank_summary());
+    world.stage.communication = per_rank.first().map_or(0.0, |r| r.waiting_s);
+    let wall = started.elapsed().as_secs_f64();
+    for (size, e) in world.counters.solve.failures.iter().take(5) {
+        notes.push(format!(
+            "LCP solve of {size} rows failed ({e}); used projected Gauss-Seidel"
+        ));
+    }
+
+    let summary = Summary {
+        scene: world.scene.name.clone(),
+        ranks: per_rank.len() as u32,
+        bodies: world.bodies.len(),
+        steps: world.steps,
+        sim_time_s: world.time(),
+        wall_time_s: wall,
+        dt_s: dt,
+        frame_interval_s: settings.frame_interval,
+        worst_frame_s: worst_frame,
+        realtime_factor: if wall > 0.0 { world.time() / wall } else { 0.0 },
+        end_reason: if failure.is_some() {
+            "failed".into()
+        } else {
+            end_reason.into()
+        },
+        failure: failure.clone(),
+        max_penetration_m: world.max_penetration,
+        energy_initial_j: energy_initial,
+        energy_final_j: world.energy(),
+        stage_seconds: world.stage.clone(),
+        per_rank,
+        state_hash: world.state_hash(),
+        counters: world.counters.clone(),
+        bodies_resting: world
+            .bodies
+            .iter()
+            .filter(|b| b.activity == Activity::Sleeping)
+            .count(),
+        bodies_fallen: world
+            .bodies
+            .iter()
+            .filter(|b| b.activity == Activity::Fallen)
+            .count(),
+        distributed,
+        frames_rendered,
+        frames_dropped,
+        render_adapter: adapter,
+        notes,
+    };
+    let json = serde_json::to_vec_pretty(&summary).map_err(|e| RunError::Io(e.to_string()))?;
+    write_atomic(&summary_path, &json).map_err(|e| io(e, "summary.json"))?;
+    match failure {
+        Some(f) => Err(RunError::Failed(f)),
+        None => Ok(summary),
+    }
+}

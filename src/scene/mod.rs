@@ -1,0 +1,751 @@
+//! Scene loading: TOML file → validated `Scene` (object definitions with exact
+//! mass properties, bodies in scene order, forces, settings).
+//!
+//! Every rank calls `load` itself: static shapes and masses never travel.
+//! Every problem becomes one `SceneError` naming the file and the field.
+
+pub mod mesh_files;
+pub mod schema;
+pub mod shapes;
+
+use crate::body::mass::{MomentSum, check_inertia, principal_axes};
+use crate::body::{
+    Activity, Body, BodyId, BodyKind, BodyState, BoundingSphere, ObjectDef, ObjectId, Part,
+};
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use rand::{RngExt, SeedableRng};
+use schema::{CombineRule, ObjectSection, SceneFile};
+use std::path::{Path, PathBuf};
+
+/// A scene asking for more bodies than this is refused, not attempted.
+pub const MAX_BODIES: u64 = 200_000;
+/// A scene file larger than this is refused before parsing.
+pub const MAX_SCENE_BYTES: u64 = 16 * 1024 * 1024;
+
+/// One line: `file: field: message`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}: {}{}", file.display(), if field.is_empty() { String::new() } else { format!("{field}: ") }, message)]
+pub struct SceneError {
+    pub file: PathBuf,
+    pub field: String,
+    pub message: String,
+}
+
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    pub size: [u32; 2],
+    pub eye: Option<Vector3<f64>>,
+    pub target: Option<Vector3<f64>>,
+    pub every: f64,
+    pub fov_y_deg: f64,
+    pub video_fps: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub gravity: Vector3<f64>,
+    pub dt: f64,
+    pub duration: Option<f64>,
+    pub until_rest: bool,
+    pub max_duration: f64,
+    pub fall_z: f64,
+    pub frame_interval: f64,
+    pub restitution_rule: CombineRule,
+    pub friction_rule: CombineRule,
+    /// Trajectory sampling interval; `None` samples every step.
+    pub sample_every: Option<f64>,
+    pub render: Option<RenderSettings>,
+}
+
+impl Settings {
+    /// Simulated time at which the run stops at the latest.
+    pub fn end_time(&self) -> f64 {
+        self.duration.unwrap_or(self.max_duration)
+    }
+}
+
+/// An external force on one body over [start, end).
+#[derive(Clone, Debug)]
+pub struct ForceWindow {
+    pub body: BodyId,
+    pub force: Vector3<f64>,
+    pub torque: Vector3<f64>,
+    pub start: f64,
+    pub end: f64,
+}
+
+/// A loaded, validated scene: static data plus the initial state of every body.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub name: String,
+    pub path: PathBuf,
+    pub settings: Settings,
+    pub objects: Vec<ObjectDef>,
+    pub bodies: Vec<Body>,
+    pub forces: Vec<ForceWindow>,
+}
+
+impl Scene {
+    pub fn object_of(&self, body: BodyId) -> &ObjectDef {
+        &self.objects[self.bodies[body.index()].object.0 as usize]
+    }
+}
+
+/// Reads, parses and validates a scene file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let fail = |field: &str, message: String| SceneError {
+        file: path.to_path_buf(),
+        field: field.to_string(),
+        message,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| fail("", format!("cannot read scene: {e}")))?;
+    if meta.len() > MAX_SCENE_BYTES {
+        return Err(fail(
+            "",
+            format!("scene file is larger than {MAX_SCENE_BYTES} bytes"),
+        ));
+    }
+    let text =
+        std::fs::read_to_string(path).map_err(|e| fail("", format!("cannot read scene: {e}")))?;
+    let file = parse(&text).map_err(|(field, message)| fail(&field, message))?;
+    let base_dir = path.parent().unwrap_or(Path::new("."));
+    let name = path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("scene")
+        .to_string();
+    build(file, base_dir, name, path).map_err(|(field, message)| fail(&field, message))
+}
+
+/// Parses TOML text into the schema; errors are (field path, message).
+pub fn parse(text: &str) -> Result<SceneFile, (String, String)> {
+    let line_of = |span: Option<std::ops::Range<usize>>| {
+        span.map(|s| {
+            format!(
+                "line {}: ",
+                text[..s.start.min(text.len())].matches('\n').count() + 1
+            )
+        })
+        .unwrap_or_default()
+    };
+    let de = toml::Deserializer::parse(text).map_err(|e| {
+        (
+            String::new(),
+            format!("{}{}", line_of(e.span()), one_line(e.message())),
+        )
+    })?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        let field = if path == "." { String::new() } else { path };
+        (
+            field,
+            format!("{}{}", line_of(inner.span()), one_line(inner.message())),
+        )
+    })
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+type FieldResult<T> = Result<T, (String, String)>;
+
+fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldResult<Scene> {
+    let settings = build_settings(&file)?;
+    let mut objects = Vec::new();
+    let mut object_ids = std::collections::BTreeMap::new();
+    for (index, (obj_name, section)) in file.objects.iter().enumerate() {
+        let def = build_object(obj_name, section, index, base_dir)?;
+        object_ids.insert(obj_name.clone(), ObjectId(objects.len() as u32));
+        objects.push(def);
+    }
+    let lookup = |name: &str, field: String| -> FieldResult<ObjectId> {
+        object_ids.get(name).copied().ok_or_else(|| {
+            let known: Vec<&str> = object_ids.keys().map(String::as_str).collect();
+            (
+                field,
+                format!("unknown object '{name}' (defined: {})", known.join(", ")),
+            )
+        })
+    };
+
+    let scattered: u64 = file.scatter.iter().map(|s| s.count).sum();
+    if file.bodies.len() as u64 + scattered > MAX_BODIES {
+        return Err((
+            "scatter.count".into(),
+            format!(
+                "scene asks for {} bodies, more than the limit of {MAX_BODIES}",
+                file.bodies.len() as u64 + scattered
+            ),
+        ));
+    }
+
+    let mut bodies = Vec::new();
+    for (i, b) in file.bodies.iter().enumerate() {
+        let f = format!("bodies[{i}]");
+        let object = lookup(&b.object, format!("{f}.object"))?;
+        shapes::finite_all(&b.position, &format!("{f}.position"))?;
+        shapes::finite_all(&b.velocity, &format!("{f}.velocity"))?;
+        shapes::finite_all(&b.angular_velocity, &format!("{f}.angular_velocity"))?;
+        let orientation = shapes::unit_quaternion(&b.orientation, &format!("{f}.orientation"))?;
+        let kind = match (&b.driven, b.fixed) {
+            (Some(_), true) => {
+                return Err((
+                    format!("{f}.driven"),
+                    "a body cannot be both fixed and driven".into(),
+                ));
+            }
+            (Some(d), false) => {
+                shapes::finite_all(&d.velocity, &format!("{f}.driven.velocity"))?;
+                shapes::finite_all(&d.angular_velocity, &format!("{f}.driven.angular_velocity"))?;
+                BodyKind::Driven {
+                    velocity: d.velocity.into(),
+                    angular_velocity: d.angular_velocity.into(),
+                }
+            }
+            (None, true) => BodyKind::Fixed,
+            (None, false) => BodyKind::Dynamic,
+        };
+        bodies.push(make_body(
+            &objects[object.0 as usize],
+            object,
+            kind,
+            Vector3::from(b.position),
+            orientation,
+            Vector3::from(b.velocity),
+            Vector3::from(b.angular_velocity),
+        ));
+    }
+
+    for (si, s) in file.scatter.iter().enumerate() {
+        scatter(&mut bodies, &objects, s, si, &lookup)?;
+    }
+
+    let mut forces = Vec::new();
+    for (i, f) in file.forces.iter().enumerate() {
+        let field = format!("forces[{i}]");
+        if f.body >= bodies.len() as u64 {
+            return Err((
+                format!("{field}.body"),
+                format!(
+                    "no body {} (the scene has {} bodies, numbered from 0)",
+                    f.body,
+                    bodies.len()
+                ),
+            ));
+        }
+        shapes::finite_all(&f.force, &format!("{field}.force"))?;
+        shapes::finite_all(&f.torque, &format!("{field}.torque"))?;
+        shapes::finite_all(&[f.start], &format!("{field}.start"))?;
+        let end = f.end.unwrap_or(f64::INFINITY);
+        if end.is_nan() || end <= f.start {
+            return Err((format!("{field}.end"), "must be later than start".into()));
+        }
+        forces.push(ForceWindow {
+            body: BodyId(f.body as u32),
+            force: f.force.into(),
+            torque: f.torque.into(),
+            start: f.start,
+            end,
+        });
+    }
+
+    Ok(Scene {
+        name,
+        path: path.to_path_buf(),
+        settings,
+        objects,
+        bodies,
+        forces,
+    })
+}
+
+fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
+    let w = &file.world;
+    shapes::finite_all(&w.gravity, "world.gravity")?;
+    shapes::positive(w.dt, "world.dt")?;
+    if w.dt > 1.0 {
+        return Err((
+            "world.dt".into(),
+            format!("must be at most 1 s (got {})", w.dt),
+        ));
+    }
+    shapes::positive(w.frame_interval, "world.frame_interval")?;
+    shapes::positive(w.max_duration, "world.max_duration")?;
+    shapes::finite_all(&[w.fall_z], "world.fall_z")?;
+    if let Some(d) = w.duration {
+        if !d.is_finite() || d < 0.0 {
+            return Err((
+                "world.duration".into(),
+                format!("must be a finite number ≥ 0 (got {d})"),
+            ));
+        }
+    } else if !w.until_rest {
+        return Err((
+            "world.duration".into(),
+            "is required unless until_rest = true".into(),
+        ));
+    }
+    if let Some(s) = file.output.sample_every {
+        shapes::positive(s, "output.sample_every")?;
+    }
+    let render = match &file.render {
+        None => None,
+        Some(r) => {
+            if r.size[0] < 16 || r.size[1] < 16 || r.size[0] > 8192 || r.size[1] > 8192 {
+                return Err((
+                    "render.size".into(),
+                    "each side must be between 16 and 8192 pixels".into(),
+                ));
+            }
+            if let Some(e) = &r.eye {
+                shapes::finite_all(e, "render.eye")?;
+            }
+            if let Some(t) = &r.target {
+                shapes::finite_all(t, "render.target")?;
+            }
+            if !(r.fov_y_deg > 1.0 && r.fov_y_deg < 179.0) {
+                return Err((
+                    "render.fov_y_deg".into(),
+                    "must be between 1 and 179 degrees".into(),
+                ));
+            }
+            let every = r.every.unwrap_or(w.frame_interval);
+            shapes::positive(every, "render.every")?;
+            let video_fps = r.video_fps.unwrap_or(1.0 / every);
+            shapes::positive(video_fps, "render.video_fps")?;
+            Some(RenderSettings {
+                size: r.size,
+                eye: r.eye.map(Vector3::from),
+                target: r.target.map(Vector3::from),
+                every,
+                fov_y_deg: r.fov_y_deg,
+                video_fps,
+            })
+        }
+    };
+    Ok(Settings {
+        gravity: w.gravity.into(),
+        dt: w.dt,
+        duration: w.duration,
+        until_rest: w.until_rest,
+        max_duration: w.max_duration,
+        fall_z: w.fall_z,
+        frame_interval: w.frame_interval,
+        restitution_rule: w.restitution_rule,
+        friction_rule: w.friction_rule,
+        sample_every: file.output.sample_every,
+        render,
+    })
+}
+
+/// Distinct, readable colours for object definitions without `color`.
+const PALETTE: [[f32; 3]; 8] = [
+    [0.86, 0.30, 0.24],
+    [0.25, 0.55, 0.85],
+    [0.95, 0.70, 0.20],
+    [0.35, 0.70, 0.40],
+    [0.60, 0.40, 0.75],
+    [0.90, 0.50, 0.70],
+    [0.30, 0.75, 0.75],
+    [0.75, 0.60, 0.45],
+];
+
+fn build_object(
+    name: &str,
+    s: &ObjectSection,
+    index: usize,
+    base_dir: &Path,
+) -> FieldResult<ObjectDef> {
+    let f = format!("objects.{name}");
+    let named = shapes::build_parts(&s.shape, &format!("{f}.shape"), base_dir)?;
+    let mut moments = MomentSum::new();
+    for p in &named {
+        moments.add_mesh(p.hull.vertices(), &p.hull.triangles());
+    }
+    let props = moments.finish();
+    let scale = named
+        .iter()
+        .flat_map(|p| p.hull.vertices().iter())
+        .map(|v| v.norm())
+        .fold(0.0, f64::max);
+    if !(props.volume > 1e-12 * scale.powi(3)) {
+        return Err((
+            format!("{f}.shape"),
+            format!("has zero volume ({:e} m³)", props.volume),
+        ));
+    }
+    let mass = match (s.mass, s.density) {
+        (Some(_), Some(_)) => {
+            return Err((format!("{f}.mass"), "give mass or density, not both".into()));
+        }
+        (None, None) => return Err((format!("{f}.mass"), "is required (or give density)".into())),
+        (Some(m), None) => {
+            shapes::positive(m, &format!("{f}.mass"))?;
+            m
+        }
+        (None, Some(d)) => {
+            shapes::positive(d, &format!("{f}.density"))?;
+            d * props.volume
+        }
+    };
+    let inertia = match &s.inertia {
+        Some(rows) => {
+            let m = Matrix3::from_row_slice(&rows.concat());
+            check_inertia(&m).map_err(|e| (format!("{f}.inertia"), e))?;
+            m
+        }
+        None => {
+            let m = props.unit_inertia * (mass / props.volume);
+            check_inertia(&m)
+                .map_err(|e| (format!("{f}.shape"), format!("computed inertia {e}")))?;
+            m
+        }
+    };
+    let inv_inertia = inertia
+        .try_inverse()
+        .ok_or_else(|| (format!("{f}.inertia"), "is singular".to_string()))?;
+    let (principal_rotation, principal_moments) = principal_axes(&inertia);
+    if !(0.0..=1.0).contains(&s.restitution) {
+        return Err((
+            format!("{f}.restitution"),
+            format!("must be between 0 and 1 (got {})", s.restitution),
+        ));
+    }
+    if !s.friction.is_finite() || s.friction < 0.0 {
+        return Err((
+            format!("{f}.friction"),
+            format!("must be a finite number ≥ 0 (got {})", s.friction),
+        ));
+    }
+    if let Some(c) = s.color {
+        if c.iter().any(|x| !(0.0..=1.0).contains(x)) {
+            return Err((
+                format!("{f}.color"),
+                "components must be between 0 and 1".into(),
+            ));
+        }
+    }
+
+    // Re-centre the body frame at the centre of mass.
+    let recentre = Isometry3::from_parts(
+        Translation3::from(-props.centroid),
+        UnitQuaternion::identity(),
+    );
+    let parts: Vec<Part> = named
+        .iter()
+        .map(|p| {
+            let hull = p.hull.transformed(&recentre);
+            let (center, radius) = hull.bounding_sphere();
+            Part {
+                hull,
+                sphere: BoundingSphere { center, radius },
+            }
+        })
+        .collect();
+    let polygon_count = parts.iter().map(|p| p.hull.face_count()).sum();
+    let thickness = parts
+        .iter()
+        .map(|p| min_thickness(&p.hull))
+        .fold(f64::INFINITY, f64::min);
+
+    let spheres = match &s.spheres {
+        Some(list) => {
+            if list.is_empty() {
+                return Err((
+                    format!("{f}.spheres"),
+                    "must list at least one sphere".into(),
+                ));
+            }
+            let mut out = Vec::new();
+            for (i, sp) in list.iter().enumerate() {
+                shapes::finite_all(&sp.center, &format!("{f}.spheres[{i}].center"))?;
+                shapes::positive(sp.radius, &format!("{f}.spheres[{i}].radius"))?;
+                out.push(BoundingSphere {
+                    center: sp.center.into(),
+                    radius: sp.radius,
+                });
+            }
+            // Spheres that miss part of the shape would hide collisions.
+            for (pi, p) in parts.iter().enumerate() {
+                for (vi, v) in p.hull.vertices().iter().enumerate() {
+                    let inside = out
+                        .iter()
+                        .any(|sp| (v - sp.center).norm() <= sp.radius * (1.0 + 1e-9));
+                    if !inside {
+                        return Err((
+                            format!("{f}.spheres"),
+                            format!(
+                                "do not enclose vertex {vi} of part '{}' at {:?} (centre-of-mass frame)",
+                                named[pi].name,
+                                [v.x, v.y, v.z]
+                            ),
+                        ));
+                    }
+                }
+            }
+            out
+        }
+        None => parts.iter().flat_map(|p| part_spheres(&p.hull)).collect(),
+    };
+
+    Ok(ObjectDef {
+        name: name.to_string(),
+        parts,
+        mass,
+        inertia,
+        inv_inertia,
+        principal_rotation,
+        principal_moments,
+        restitution: s.restitution,
+        friction: s.friction,
+        spheres,
+        shape_origin: -props.centroid,
+        color: s.color.unwrap_or(PALETTE[index % PALETTE.len()]),
+        polygon_count,
+        volume: props.volume,
+        min_thickness: thickness,
+    })
+}
+
+/// Broadphase spheres of one convex part: one sphere, or several along the
+/// longest axis when the part is long and thin (SPEC 2.3, fig. 3.5), where a
+/// single sphere would be mostly empty space and report false pairs.
+///
+/// The part is cut into k slabs along its longest axis; each slab's sphere is
+/// centred on the slab's middle and reaches the farthest point of the part
+/// inside the slab. Those points are vertices of (part ∩ slab): the part's own
+/// vertices in the slab and the crossings of its edges with the slab planes.
+pub fn part_spheres(hull: &crate::collision::polyhedron::ConvexPolyhedron) -> Vec<BoundingSphere> {
+    let verts = hull.vertices();
+    let (center, radius) = hull.bounding_sphere();
+    let mut lo = verts[0];
+    let mut hi = verts[0];
+    for v in verts {
+        lo = lo.inf(v);
+        hi = hi.sup(v);
+    }
+    let ext = hi - lo;
+    let axis = ext.imax();
+    let long = ext[axis];
+    let short = ext
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != axis)
+        .map(|(_, x)| *x)
+        .fold(0.0, f64::max);
+    let k = if short > 0.0 {
+        (long / short).floor().clamp(1.0, 8.0) as usize
+    } else {
+        1
+    };
+    if k < 3 {
+        return vec![BoundingSphere { center, radius }];
+    }
+    let width = long / k as f64;
+    let mid = 0.5 * (lo + hi);
+    let mut edges = Vec::new();
+    for face in hull.faces() {
+        let n = face.vertices.len();
+        for i in 0..n {
+            edges.push((face.vertices[i], face.vertices[(i + 1) % n]));
+        }
+    }
+    (0..k)
+        .map(|s| {
+            let a = lo[axis] + width * s as f64;
+            let b = a + width;
+            let mut c = mid;
+            c[axis] = 0.5 * (a + b);
+            let mut r: f64 = 0.0;
+            for v in verts {
+                if v[axis] >= a - 1e-12 && v[axis] <= b + 1e-12 {
+                    r = r.max((v - c).norm());
+                }
+            }
+            for &(i, j) in &edges {
+                let (p, q) = (verts[i], verts[j]);
+                for plane in [a, b] {
+                    let (dp, dq) = (p[axis] - plane, q[axis] - plane);
+                    if dp * dq < 0.0 {
+                        let x = p + (q - p) * (dp / (dp - dq));
+                        r = r.max((x - c).norm());
+                    }
+                }
+            }
+            BoundingSphere {
+                center: c,
+                radius: r * (1.0 + 1e-9) + 1e-12,
+            }
+        })
+        .collect()
+}
+
+fn min_thickness(hull: &crate::collision::polyhedron::ConvexPolyhedron) -> f64 {
+    let verts = hull.vertices();
+    let c = verts.iter().sum::<Vector3<f64>>() / verts.len() as f64;
+    hull.faces()
+        .iter()
+        .map(|f| f.normal.dot(&(verts[f.vertices[0]] - c)))
+        .fold(f64::INFINITY, f64::min)
+        * 2.0
+}
+
+/// Builds a body from a placement of the shape's origin.
+fn make_body(
+    object: &ObjectDef,
+    id: ObjectId,
+    kind: BodyKind,
+    origin: Vector3<f64>,
+    orientation: UnitQuaternion<f64>,
+    velocity: Vector3<f64>,
+    angular_velocity: Vector3<f64>,
+) -> Body {
+    // The scene places the shape's origin; the centre of mass sits at −shape_origin from it.
+    let position = origin - orientation * object.shape_origin;
+    let r = orientation.to_rotation_matrix();
+    let inertia_world = r.matrix() * object.inertia * r.matrix().transpose();
+    let (velocity, angular_momentum) = match kind {
+        BodyKind::Dynamic => (velocity, inertia_world * angular_velocity),
+        BodyKind::Fixed => (Vector3::zeros(), Vector3::zeros()),
+        BodyKind::Driven { velocity, .. } => (velocity, Vector3::zeros()),
+    };
+    Body {
+        object: id,
+        kind,
+        state: BodyState {
+            position,
+            orientation,
+            velocity,
+            angular_momentum,
+        },
+        activity: Activity::Awake,
+    }
+}
+
+/// World-frame axis-aligned boxes of a body's parts (for placement checks).
+fn part_boxes(object: &ObjectDef, body: &Body) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+    let pose = body.pose();
+    object
+        .parts
+        .iter()
+        .map(|p| {
+            let mut lo = Vector3::repeat(f64::INFINITY);
+            let mut hi = Vector3::repeat(f64::NEG_INFINITY);
+            for v in p.hull.vertices() {
+                let w = pose * nalgebra::Point3::from(*v);
+                lo = lo.inf(&w.coords);
+                hi = hi.sup(&w.coords);
+            }
+            (lo, hi)
+        })
+        .collect()
+}
+
+fn boxes_overlap(a: &[(Vector3<f64>, Vector3<f64>)], b: &[(Vector3<f64>, Vector3<f64>)]) -> bool {
+    a.iter().any(|(alo, ahi)| {
+        b.iter()
+            .any(|(blo, bhi)| (0..3).all(|k| alo[k] <= bhi[k] && blo[k] <= ahi[k]))
+    })
+}
+
+/// Random, non-overlapping placement reproducible from the seed. Overlap is
+/// judged on the parts' world boxes: conservative (never accepts an overlap).
+fn scatter(
+    bodies: &mut Vec<Body>,
+    objects: &[ObjectDef],
+    s: &schema::ScatterSection,
+    index: usize,
+    lookup: &dyn Fn(&str, String) -> FieldResult<ObjectId>,
+) -> FieldResult<()> {
+    let f = format!("scatter[{index}]");
+    if s.objects.is_empty() {
+        return Err((
+            format!("{f}.objects"),
+            "must list at least one object".into(),
+        ));
+    }
+    let ids = s
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, n)| lookup(n, format!("{f}.objects[{i}]")))
+        .collect::<FieldResult<Vec<_>>>()?;
+    shapes::finite_all(&s.min, &format!("{f}.min"))?;
+    shapes::finite_all(&s.max, &format!("{f}.max"))?;
+    shapes::finite_all(&s.velocity, &format!("{f}.velocity"))?;
+    if (0..3).any(|k| s.min[k] > s.max[k]) {
+        return Err((format!("{f}.max"), "must be ≥ min on every axis".into()));
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(s.seed);
+    let mut placed: Vec<Vec<(Vector3<f64>, Vector3<f64>)>> = bodies
+        .iter()
+        .map(|b| part_boxes(&objects[b.object.0 as usize], b))
+        .collect();
+    const ATTEMPTS_PER_BODY: usize = 2000;
+    for n in 0..s.count as usize {
+        let id = ids[n % ids.len()];
+        let object = &objects[id.0 as usize];
+        let mut done = false;
+        for _ in 0..ATTEMPTS_PER_BODY {
+            let p = Vector3::from_fn(|k, _| s.min[k] + (s.max[k] - s.min[k]) * rng.random::<f64>());
+            let q = if s.random_orientation {
+                random_rotation(&mut rng)
+            } else {
+                UnitQuaternion::identity()
+            };
+            let body = make_body(
+                object,
+                id,
+                BodyKind::Dynamic,
+                p,
+                q,
+                s.velocity.into(),
+                Vector3::zeros(),
+            );
+            let boxes = part_boxes(object, &body);
+            if placed.iter().any(|other| boxes_overlap(&boxes, other)) {
+                continue;
+            }
+            placed.push(boxes);
+            bodies.push(body);
+            done = true;
+            break;
+        }
+        if !done {
+            return Err((
+                format!("{f}.count"),
+                format!(
+                    "could place only {n} of {} bodies without overlap; enlarge min/max or lower count",
+                    s.count
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Uniformly distributed rotation (Shoemake's method).
+fn random_rotation(rng: &mut impl rand::Rng) -> UnitQuaternion<f64> {
+    let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
+    let tau = std::f64::consts::TAU;
+    let q = nalgebra::Quaternion::new(
+        (1.0 - u1).sqrt() * (tau * u2).sin(),
+        (1.0 - u1).sqrt() * (tau * u2).cos(),
+        u1.sqrt() * (tau * u3).sin(),
+        u1.sqrt() * (tau * u3).cos(),
+    );
+    UnitQuaternion::from_quaternion(q)
+}
+
+/// The initial state as bodies, for convenience in tests.
+pub fn body_ids(scene: &Scene) -> impl Iterator<Item = BodyId> + '_ {
+    (0..scene.bodies.len()).map(|i| BodyId(i as u32))
+}
+
+impl Activity {
+    pub fn is_awake(self) -> bool {
+        matches!(self, Activity::Awake)
+    }
+}

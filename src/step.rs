@@ -1,0 +1,979 @@
+//! The world step: SPEC 2.1's frame loop, stage by stage.
+//!
+//! ```text
+//! build_islands   contacts touching now → systems (islands), sorted by lowest body id
+//! solve_islands   impact impulses + resting/friction forces per island (Dantzig LCP)
+//! integrate       every awake body to the end of the step (constant force)
+//! broadphase      swept bounding spheres → candidate pairs
+//! narrowphase     V-Clip on candidate pairs at the end of the step → contacts, overlaps
+//! time_of_impact  an overlap rolls back only the bodies that can reach each other
+//!                 (a connected group of swept spheres) to the touching instant found
+//!                 by bisection, solves the impact there and re-integrates the group
+//! publish_frame   (caller) trajectory sample, render poses
+//! ```
+//!
+//! The pure work (V-Clip on pairs, LCP on islands) goes through an
+//! `Executor`: inline on one rank, or scattered over MPI ranks by `cluster`.
+//! Results come back in task order, so the outcome never depends on which
+//! rank did what.
+
+use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
+use crate::collision::broadphase::{self, SphereProxy};
+use crate::collision::manifold::ContactPoint;
+use crate::collision::narrowphase::{
+    self, CONTACT_TOLERANCE, CachedFeatures, PairResult, PairTask,
+};
+use crate::contact::island;
+use crate::contact::solver::{
+    self, IslandBody, IslandContact, IslandResult, IslandTask, SolveStats,
+};
+use crate::dynamics::integrate::integrate;
+use crate::output::summary::{Distribution, RankSummary};
+use crate::scene::Scene;
+use nalgebra::{Isometry3, Point3, Vector3};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// Runs the distributable stages. One rank: `Inline`; several: `cluster`.
+pub trait Executor {
+    fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult>;
+    fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult>;
+    /// Ends the run on every rank; returns the per-rank accounts and how often
+    /// each stage was distributed.
+    fn finish(&mut self) -> (Vec<RankSummary>, Distribution);
+}
+
+/// Runs every stage on this rank.
+#[derive(Default)]
+pub struct Inline {
+    busy_s: f64,
+    narrowphase_tasks: u64,
+    island_tasks: u64,
+    dist: Distribution,
+}
+
+impl Executor for Inline {
+    fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
+        let clock = Instant::now();
+        self.narrowphase_tasks += tasks.len() as u64;
+        self.dist.narrowphase_local += 1;
+        let r = tasks
+            .iter()
+            .map(|t| narrowphase::query_pair(objects, t))
+            .collect();
+        self.busy_s += clock.elapsed().as_secs_f64();
+        r
+    }
+    fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
+        let clock = Instant::now();
+        self.island_tasks += tasks.len() as u64;
+        self.dist.solve_local += 1;
+        let r = tasks.iter().map(solver::solve_island).collect();
+        self.busy_s += clock.elapsed().as_secs_f64();
+        r
+    }
+    fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
+        let me = RankSummary {
+            rank: 0,
+            role: "coordinator".into(),
+            busy_s: self.busy_s,
+            tasks: self.narrowphase_tasks + self.island_tasks,
+            narrowphase_tasks: self.narrowphase_tasks,
+            island_tasks: self.island_tasks,
+            speed: 1.0,
+            ..Default::default()
+        };
+        (vec![me], self.dist.clone())
+    }
+}
+
+/// Resting-system thresholds: a system whose bodies all stay this slow for
+/// `sleep_after` seconds stops being integrated, tested and solved.
+pub const SLEEP_LINEAR: f64 = 5e-3;
+pub const SLEEP_ANGULAR: f64 = 5e-2;
+/// A step that needs more impact events than this accepts the overlap left.
+pub const MAX_EVENTS_PER_STEP: usize = 256;
+
+/// Wall seconds per stage (summary's `stage_seconds`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct StageSeconds {
+    pub integrate: f64,
+    pub broadphase: f64,
+    pub narrowphase: f64,
+    pub time_of_impact: f64,
+    pub build_islands: f64,
+    pub solve_islands: f64,
+    pub communication: f64,
+    pub render: f64,
+}
+
+/// What the simulator did and what it skipped, counted over the run.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Counters {
+    pub steps: u64,
+    pub integrations: u64,
+    pub integrations_skipped_resting: u64,
+    pub candidate_pairs: u64,
+    pub pair_tests: u64,
+    pub pairs_skipped_resting: u64,
+    pub vclip_iterations: u64,
+    pub toi_events: u64,
+    pub toi_bisection_queries: u64,
+    pub max_events_in_step: u64,
+    pub steps_with_events: u64,
+    pub overlaps_accepted: u64,
+    pub islands: u64,
+    pub contacts: u64,
+    pub solve: SolveStats,
+    pub bodies_fallen: u64,
+    pub wakes: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct NumericalFailure {
+    pub body: BodyId,
+    pub stage: &'static str,
+    pub time: f64,
+    pub detail: String,
+}
+
+impl std::fmt::Display for NumericalFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        write!(
+            f,
+            "numerical failure at t = {:.6} s in stage {}: body {} {}",
+            self.time, self.stage, self.body.0, self.detail
+        )
+    }
+}
+
+/// Contacts of one touching body pair at the current time.
+#[derive(Clone, Debug)]
+struct Touching {
+    a: BodyId,
+    b: BodyId,
+    points: Vec<ContactPoint>,
+}
+
+/// The simulated world: static scene data plus the changing state.
+pub struct World {
+    pub scene: Scene,
+    pub bodies: Vec<Body>,
+    /// Completed steps; time = steps × dt exactly (no accumulated rounding).
+    pub steps: u64,
+    pub stage: StageSeconds,
+    pub counters: Counters,
+    /// Largest overlap seen at the end of any step, metres.
+    pub max_penetration: f64,
+    /// Enables resting systems (on by default; analytic tests may switch it off).
+    pub sleep_enabled: bool,
+    pub sleep_after: f64,
+    touching: Vec<Touching>,
+    features: HashMap<(u32, u32), Vec<CachedFeatures>>,
+    sleep_timer: Vec<f64>,
+    /// Resting system a sleeping body belongs to (its lowest body id).
+    sleep_group: Vec<u32>,
+    /// Normal force on each touching pair in the last resting solve (for tests).
+    pub last_normal_force_sum: f64,
+}
+
+/// A body's motion over the current step: start state at `time` (seconds into
+/// the step) with constant force and torque until the end of the step.
+#[derive(Clone, Copy)]
+struct Segment {
+    state: BodyState,
+    time: f64,
+    force: Vector3<f64>,
+    torque: Vector3<f64>,
+}
+
+impl World {
+    pub fn new(scene: Scene) -> World {
+        let n = scene.bodies.len();
+        let bodies = scene.bodies.clone();
+        World {
+            scene,
+            bodies,
+            steps: 0,
+            stage: StageSeconds::default(),
+            counters: Counters::default(),
+            max_penetration: 0.0,
+            sleep_enabled: true,
+            sleep_after: 0.5,
+            touching: Vec::new(),
+            features: HashMap::new(),
+            sleep_timer: vec![0.0; n],
+            sleep_group: (0..n as u32).collect(),
+            last_normal_force_sum: 0.0,
+        }
+    }
+
+    pub fn time(&self) -> f64 {
+        self.steps as f64 * self.scene.settings.dt
+    }
+
+    pub fn object(&self, body: usize) -> &ObjectDef {
+        &self.scene.objects[self.bodies[body].object.0 as usize]
+    }
+
+    /// Kinetic plus gravitational potential energy of the dynamic bodies still simulated.
+    pub fn energy(&self) -> f64 {
+        let g = self.scene.settings.gravity;
+        self.bodies
+            .iter()
+            .filter(|b| b.is_dynamic() && b.activity != Activity::Fallen)
+            .map(|b| {
+                let o = &self.scene.objects[b.object.0 as usize];
+                b.kinetic_energy(o) - o.mass * g.dot(&b.state.position)
+            })
+            .sum()
+    }
+
+    /// True when every dynamic body rests or has fallen off.
+    pub fn at_rest(&self) -> bool {
+        self.bodies.iter().all(|b| match b.kind {
+            BodyKind::Dynamic => b.activity != Activity::Awake,
+            BodyKind::Fixed => true,
+            BodyKind::Driven {
+                velocity,
+                angular_velocity,
+            } => velocity == Vector3::zeros() && angular_velocity == Vector3::zeros(),
+        })
+    }
+
+    fn moving(&self, i: usize) -> bool {
+        let b = &self.bodies[i];
+        b.activity == Activity::Awake && !matches!(b.kind, BodyKind::Fixed)
+    }
+
+    fn external(&self, i: usize, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let o = self.object(i);
+        let mut f = o.mass * self.scene.settings.gravity;
+        let mut tau = Vector3::zeros();
+        for w in &self.scene.forces {
+            if w.body.index() == i && w.start <= t && t < w.end {
+                f += w.force;
+                tau += w.torque;
+            }
+        }
+        (f, tau)
+    }
+
+    /// Advances the world by one step of `dt`.
+    pub fn step(&mut self, exec: &mut dyn Executor) -> Result<(), NumericalFailure> {
+        let h = self.scene.settings.dt;
+        let t0 = self.time();
+        let n = self.bodies.len();
+        self.wake_for_forces(t0, h);
+
+        // External forces at the start of the step (constant over it).
+        let mut seg: Vec<Segment> = (0..n)
+            .map(|i| {
+                let (force, torque) = if self.bodies[i].is_dynamic() && self.moving(i) {
+                    self.external(i, t0)
+                } else {
+                    (Vector3::zeros(), Vector3::zeros())
+                };
+                Segment {
+                    state: self.bodies[i].state,
+                    time: 0.0,
+                    force,
+                    torque,
+                }
+            })
+            .collect();
+
+        // build_islands + solve_islands on the contacts touching now.
+        let touching = std::mem::take(&mut self.touching);
+        let all_moving: Vec<usize> = (0..n).filter(|&i| self.moving(i)).collect();
+        self.contact_phase(exec, &touching, &all_moving, &mut seg, h);
+
+        // integrate
+        let clock = Instant::now();
+        let mut end: Vec<BodyState> = seg.iter().map(|s| s.state).collect();
+        for &i in &all_moving {
+            end[i] = self.integrate_segment(i, &seg[i], h);
+        }
+        self.counters.integrations += all_moving.len() as u64;
+        self.counters.integrations_skipped_resting += (0..n)
+            .filter(|&i| self.bodies[i].activity == Activity::Sleeping)
+            .count() as u64;
+        self.stage.integrate += clock.elapsed().as_secs_f64();
+
+        // broadphase + narrowphase at the end of the step.
+        let mut pairs = self.broadphase(&seg, &end);
+        let mut results = self.narrowphase_at(exec, &pairs, &end);
+
+        // time_of_impact: roll back the groups that overlap.
+        let clock = Instant::now();
+        let mut events = 0usize;
+        let mut accepted: Vec<(u32, u32)> = Vec::new();
+        let mut last_event: Option<((u32, u32), f64)> = None;
+        let mut toi_cache: HashMap<(u32, u32), Option<f64>> = HashMap::new();
+        loop {
+            let violation =
+                self.earliest_impact(&pairs, &results, &seg, h, &accepted, &mut toi_cache);
+            let Some((pair, tau)) = violation else { break };
+            if events >= MAX_EVENTS_PER_STEP || last_event == Some((pair, tau)) {
+                // No progress: keep the small overlap rather than stall the step.
+                accepted.push(pair);
+                self.counters.overlaps_accepted += 1;
+                continue;
+            }
+            last_event = Some((pair, tau));
+            events += 1;
+            let group = self.impact_group(pair, &pairs);
+            // Roll the group back to τ (re-integrating from its segment start).
+            let toi_clock = Instant::now();
+            for &i in &group {
+                let state = self.integrate_segment(i, &seg[i], tau - seg[i].time);
+                seg[i].state = state;
+                seg[i].time = tau;
+                end[i] = state;
+                if self.bodies[i].is_dynamic() {
+                    let (f, t) = self.external(i, t0 + tau);
+                    seg[i].force = f;
+                    seg[i].torque = t;
+                }
+            }
+            self.stage.time_of_impact += toi_clock.elapsed().as_secs_f64();
+            // Contacts at τ among the group and what it touches.
+            let group_pairs: Vec<(u32, u32)> = pairs
+                .iter()
+                .copied()
+                .filter(|&(a, b)| group.contains(&(a as usize)) || group.contains(&(b as usize)))
+                .collect();
+            let at_tau = self.narrowphase_at(exec, &group_pairs, &end);
+            let touching_now = self.touching_from(&group_pairs, &at_tau);
+            let woken = self.wake_touched(&touching_now, &mut seg, tau, t0);
+            let mut members = group.clone();
+            members.extend(woken);
+            members.sort_unstable();
+            members.dedup();
+            self.contact_phase(exec, &touching_now, &members, &mut seg, h - tau);
+            let toi_clock = Instant::now();
+            for &i in &members {
+                end[i] = self.integrate_segment(i, &seg[i], h - tau);
+            }
+            self.counters.integrations += members.len() as u64;
+            self.stage.time_of_impact += toi_clock.elapsed().as_secs_f64();
+            toi_cache.retain(|&(a, b), _| {
+                members.binary_search(&(a as usize)).is_err()
+                    && members.binary_search(&(b as usize)).is_err()
+            });
+            // The group's new paths may reach new bodies: redo the broadphase,
+            // and the narrowphase for the pairs that involve the group.
+            let new_pairs = self.broadphase(&seg, &end);
+            let mut old: HashMap<(u32, u32), PairResult> =
+                pairs.iter().copied().zip(results).collect();
+            let redo: Vec<(u32, u32)> = new_pairs
+                .iter()
+                .copied()
+                .filter(|&(a, b)| {
+                    members.contains(&(a as usize))
+                        || members.contains(&(b as usize))
+                        || !old.contains_key(&(a, b))
+                })
+                .collect();
+            let redone = self.narrowphase_at(exec, &redo, &end);
+            let mut fresh: HashMap<(u32, u32), PairResult> = redo.into_iter().zip(redone).collect();
+            results = new_pairs
+                .iter()
+                .map(|k| {
+                    fresh
+                        .remove(k)
+                        .or_else(|| old.remove(k))
+                        .unwrap_or_default()
+                })
+                .collect();
+            pairs = new_pairs;
+        }
+        self.counters.toi_events += events as u64;
+        self.counters.max_events_in_step = self.counters.max_events_in_step.max(events as u64);
+        if events > 0 {
+            self.counters.steps_with_events += 1;
+        }
+        self.stage.time_of_impact += clock.elapsed().as_secs_f64();
+
+        // Commit the end states.
+        for i in 0..n {
+            if self.bodies[i].activity == Activity::Awake {
+                self.bodies[i].state = end[i];
+            }
+        }
+        for (k, r) in pairs.iter().zip(&results) {
+            self.max_penetration = self.max_penetration.max(r.depth);
+            if !r.features.is_empty() {
+                self.features.insert(*k, r.features.clone());
+            }
+        }
+        self.touching = self.touching_from(&pairs, &results);
+        self.steps += 1;
+        self.counters.steps += 1;
+        self.check_finite(t0 + h)?;
+        self.wake_touched_at_end();
+        self.update_rest_and_falls(h);
+        Ok(())
+    }
+
+    fn integrate_segment(&self, i: usize, s: &Segment, h: f64) -> BodyState {
+        let b = &self.bodies[i];
+        integrate(&s.state, self.object(i), b.kind, &s.force, &s.torque, h)
+    }
+
+    /// Candidate pairs from spheres swept between each body's segment start and
+    /// its end state (fast bodies cannot skip a pair this way).
+    fn broadphase(&mut self, seg: &[Segment], end: &[BodyState]) -> Vec<(u32, u32)> {
+        let clock = Instant::now();
+        let mut proxies = Vec::new();
+        for (i, b) in self.bodies.iter().enumerate() {
+            if b.activity == Activity::Fallen {
+                continue;
+            }
+            let o = &self.scene.objects[b.object.0 as usize];
+            let (p0, q0) = (seg[i].state.position, seg[i].state.orientation);
+            let (p1, q1) = (end[i].position, end[i].orientation);
+            let angle = q0.angle_to(&q1);
+            for s in &o.spheres {
+                let c0 = p0 + q0 * s.center;
+                let c1 = p1 + q1 * s.center;
+                // The chord from c0 to c1 misses the arc of a rotating offset by
+                // at most |offset|·(1 − cos(θ/2)) ≤ |offset|·θ²/8; add it.
+                let bulge = s.center.norm() * angle * angle / 8.0;
+                proxies.push(SphereProxy {
+                    body: i as u32,
+                    center: 0.5 * (c0 + c1),
+                    radius: s.radius + 0.5 * (c1 - c0).norm() + bulge + CONTACT_TOLERANCE,
+                });
+            }
+        }
+        let pairs = broadphase::candidate_pairs(&proxies, |a, b| {
+            let (a, b) = (a as usize, b as usize);
+            // Skip pairs where neither body moves (two fixed, two resting, …).
+            self.moving(a) || self.moving(b)
+        });
+        self.counters.candidate_pairs += pairs.len() as u64;
+        self.stage.broadphase += clock.elapsed().as_secs_f64();
+        pairs
+    }
+
+    fn narrowphase_at(
+        &mut self,
+        exec: &mut dyn Executor,
+        pairs: &[(u32, u32)],
+        states: &[BodyState],
+    ) -> Vec<PairResult> {
+        let clock = Instant::now();
+        let tasks: Vec<PairTask> = pairs
+            .iter()
+            .map(|&(a, b)| self.pair_task(a, b, &states[a as usize], &states[b as usize]))
+            .collect();
+        self.counters.pair_tests += tasks.len() as u64;
+        let results = exec.narrowphase(&self.scene.objects, tasks);
+        for r in &results {
+            self.counters.vclip_iterations += r.iterations as u64;
+        }
+        self.stage.narrowphase += clock.elapsed().as_secs_f64();
+        results
+    }
+
+    fn pair_task(&self, a: u32, b: u32, sa: &BodyState, sb: &BodyState) -> PairTask {
+        PairTask {
+            a: BodyId(a),
+            b: BodyId(b),
+            object_a: self.bodies[a as usize].object.0,
+            object_b: self.bodies[b as usize].object.0,
+            pose_a: Isometry3::from_parts(sa.position.into(), sa.orientation),
+            pose_b: Isometry3::from_parts(sb.position.into(), sb.orientation),
+            warm: self.features.get(&(a, b)).cloned().unwrap_or_default(),
+            contact_tolerance: CONTACT_TOLERANCE,
+        }
+    }
+
+    fn touching_from(&self, pairs: &[(u32, u32)], results: &[PairResult]) -> Vec<Touching> {
+        pairs
+            .iter()
+            .zip(results)
+            .filter(|(_, r)| !r.contacts.is_empty())
+            .map(|(&(a, b), r)| Touching {
+                a: BodyId(a),
+                b: BodyId(b),
+                points: r.contacts.clone(),
+            })
+            .collect()
+    }
+
+    /// Finds the earliest time of impact over the overlapping pairs (and over
+    /// fast pairs that might pass through each other between samples).
+    fn earliest_impact(
+        &mut self,
+        pairs: &[(u32, u32)],
+        results: &[PairResult],
+        seg: &[Segment],
+        h: f64,
+        accepted: &[(u32, u32)],
+        cache: &mut HashMap<(u32, u32), Option<f64>>,
+    ) -> Option<((u32, u32), f64)> {
+        let mut best: Option<((u32, u32), f64)> = None;
+        for (k, r) in pairs.iter().zip(results) {
+            if accepted.contains(k) {
+                continue;
+            }
+            if let Some(&cached) = cache.get(k) {
+                if let Some(tau) = cached {
+                    if best.is_none_or(|(bk, bt)| tau < bt || (tau == bt && *k < bk)) {
+                        best = Some((*k, tau));
+                    }
+                }
+                continue;
+            }
+            let (a, b) = (k.0 as usize, k.1 as usize);
+            let start = seg[a].time.max(seg[b].time);
+            let interval = if r.needs_rollback(CONTACT_TOLERANCE) {
+                Some(
+                    self.first_overlap_sample(a, b, seg, start, h)
+                        .unwrap_or((start, h)),
+                )
+            } else {
+                // No overlap at the end: a fast pair may still have crossed.
+                self.first_overlap_sample(a, b, seg, start, h)
+            };
+            let tau = interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi));
+            cache.insert(*k, tau);
+            if let Some(tau) = tau {
+                if best.is_none_or(|(bk, bt)| tau < bt || (tau == bt && *k < bk)) {
+                    best = Some((*k, tau));
+                }
+            }
+        }
+        best
+    }
+
+    /// For pairs that move by more than their thickness during the step,
+    /// samples the path densely enough that one cannot pass through the other
+    /// unseen; returns the interval before the first overlapping sample.
+    fn first_overlap_sample(
+        &mut self,
+        a: usize,
+        b: usize,
+        seg: &[Segment],
+        start: f64,
+        h: f64,
+    ) -> Option<(f64, f64)> {
+        let pa0 = self
+            .integrate_segment(a, &seg[a], start - seg[a].time)
+            .position;
+        let pb0 = self
+            .integrate_segment(b, &seg[b], start - seg[b].time)
+            .position;
+        let pa1 = self.integrate_segment(a, &seg[a], h - seg[a].time).position;
+        let pb1 = self.integrate_segment(b, &seg[b], h - seg[b].time).position;
+        let travel = ((pa1 - pa0) - (pb1 - pb0)).norm();
+        let thickness = self
+            .object(a)
+            .min_thickness
+            .min(self.object(b).min_thickness);
+        if travel <= 0.5 * thickness {
+            return None;
+        }
+        let samples = ((travel / (0.5 * thickness)).ceil() as usize).min(10_000);
+        let mut prev = start;
+        for s in 1..=samples {
+            let t = start + (h - start) * s as f64 / samples as f64;
+            let r = self.query_at(a, b, seg, t);
+            if r.needs_rollback(CONTACT_TOLERANCE) {
+                return Some((prev, t));
+            }
+            prev = t;
+        }
+        None
+    }
+
+    fn query_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> PairResult {
+        let sa = self.integrate_segment(a, &seg[a], t - seg[a].time);
+        let sb = self.integrate_segment(b, &seg[b], t - seg[b].time);
+        self.counters.toi_bisection_queries += 1;
+        narrowphase::query_pair(
+            &self.scene.objects,
+            &self.pair_task(a as u32, b as u32, &sa, &sb),
+        )
+    }
+
+    /// Bisection for the touching instant (SPEC 2.6, fig. 3.16): `lo` is known
+    /// apart, `hi` overlapping; halve until the gap at `lo` is within half the
+    /// contact tolerance (or the interval is down to rounding).
+    fn bisect(&mut self, a: usize, b: usize, seg: &[Segment], mut lo: f64, mut hi: f64) -> f64 {
+        for _ in 0..64 {
+            if hi - lo <= 1e-13 * self.scene.settings.dt {
+                break;
+            }
+            let mid = 0.5 * (lo + hi);
+            let r = self.query_at(a, b, seg, mid);
+            if r.penetrating && (r.contacts.is_empty() || r.depth > 0.5 * CONTACT_TOLERANCE) {
+                hi = mid;
+            } else {
+                lo = mid;
+                if r.distance <= 0.5 * CONTACT_TOLERANCE {
+                    break;
+                }
+            }
+        }
+        lo
+    }
+
+    /// Bodies that must roll back with an impact of `pair`: the moving bodies
+    /// connected to it through candidate pairs. Bodies outside the group
+    /// cannot touch it during the rest of the step and keep their motion.
+    fn impact_group(&self, pair: (u32, u32), pairs: &[(u32, u32)]) -> Vec<usize> {
+        let mut group: Vec<usize> = Vec::new();
+        let mut stack: Vec<usize> = [pair.0 as usize, pair.1 as usize]
+            .into_iter()
+            .filter(|&i| self.moving(i))
+            .collect();
+        let mut adjacency: HashMap<usize, Vec<usize>> = HashMap::new();
+        for &(a, b) in pairs {
+            adjacency.entry(a as usize).or_default().push(b as usize);
+            adjacency.entry(b as usize).or_default().push(a as usize);
+        }
+        while let Some(i) = stack.pop() {
+            if group.contains(&i) {
+                continue;
+            }
+            group.push(i);
+            for &j in adjacency.get(&i).map(Vec::as_slice).unwrap_or(&[]) {
+                if self.moving(j) && !group.contains(&j) {
+                    stack.push(j);
+                }
+            }
+        }
+        group.sort_unstable();
+        group
+    }
+
+    /// Islands of the given contacts, solved; applies impulses to the segment
+    /// start states of `members` and sets their forces for the rest of the step.
+    fn contact_phase(
+        &mut self,
+        exec: &mut dyn Executor,
+        touching: &[Touching],
+        members: &[usize],
+        seg: &mut [Segment],
+        h: f64,
+    ) {
+        let clock = Instant::now();
+        let n = self.bodies.len();
+        let links: Vec<(BodyId, BodyId)> = touching.iter().map(|t| (t.a, t.b)).collect();
+        let islands = island::build_islands(n, &links, |b| {
+            let i = b.index();
+            self.bodies[i].is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok()
+        });
+        let restitution_threshold =
+            0.5 * self.scene.settings.gravity.norm() * self.scene.settings.dt;
+        let mut tasks = Vec::with_capacity(islands.len());
+        for (bodies, contact_ids) in &islands {
+            let mut index: Vec<BodyId> = bodies.clone();
+            let mut contacts = Vec::new();
+            for &ci in contact_ids {
+                let t = &touching[ci];
+                for id in [t.a, t.b] {
+                    if !index.contains(&id) {
+                        index.push(id);
+                    }
+                }
+                let ia = index.iter().position(|&x| x == t.a).unwrap() as u32;
+                let ib = index.iter().position(|&x| x == t.b).unwrap() as u32;
+                let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
+                let rules = &self.scene.settings;
+                for p in &t.points {
+                    contacts.push(IslandContact {
+                        a: ia,
+                        b: ib,
+                        point: p.point,
+                        normal: p.normal,
+                        restitution: rules
+                            .restitution_rule
+                            .combine(oa.restitution, ob.restitution),
+                        friction: rules.friction_rule.combine(oa.friction, ob.friction),
+                    });
+                }
+            }
+            let bodies: Vec<IslandBody> = index
+                .iter()
+                .map(|id| {
+                    let i = id.index();
+                    let b = &self.bodies[i];
+                    let o = self.object(i);
+                    let s = &seg[i];
+                    let dynamic =
+                        b.is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok();
+                    let body = Body {
+                        state: s.state,
+                        ..b.clone()
+                    };
+                    let inv_inertia = if dynamic {
+                        body.inv_inertia_world(o)
+                    } else {
+                        nalgebra::Matrix3::zeros()
+                    };
+                    IslandBody {
+                        id: *id,
+                        inv_mass: if dynamic { 1.0 / o.mass } else { 0.0 },
+                        inv_inertia,
+                        position: s.state.position,
+                        velocity: s.state.velocity,
+                        angular_velocity: body.angular_velocity(o),
+                        external_dv: if dynamic {
+                            s.force * (h / o.mass)
+                        } else {
+                            Vector3::zeros()
+                        },
+                        external_dw: if dynamic {
+                            inv_inertia * s.torque * h
+                        } else {
+                            Vector3::zeros()
+                        },
+                    }
+                })
+                .collect();
+            self.counters.contacts += contacts.len() as u64;
+            tasks.push(IslandTask {
+                bodies,
+                contacts,
+                dt: h,
+                restitution_threshold,
+            });
+        }
+        self.counters.islands += tasks.len() as u64;
+        self.stage.build_islands += clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let ids: Vec<Vec<BodyId>> = tasks
+            .iter()
+            .map(|t| t.bodies.iter().map(|b| b.id).collect())
+            .collect();
+        let results = exec.solve_islands(tasks);
+        self.last_normal_force_sum = 0.0;
+        for (ids, r) in ids.iter().zip(&results) {
+            self.counters.solve.add(&r.stats);
+            self.last_normal_force_sum += r.normal_force_sum;
+            for (k, id) in ids.iter().enumerate() {
+                let i = id.index();
+                if !(self.bodies[i].is_dynamic() && members.binary_search(&i).is_ok()) {
+                    continue;
+                }
+                let o = self.object(i);
+                let s = &mut seg[i];
+                s.state.velocity += r.impulse[k] / o.mass;
+                s.state.angular_momentum += r.angular_impulse[k];
+                s.force += r.force[k];
+                s.torque += r.torque[k];
+            }
+        }
+        self.stage.solve_islands += clock.elapsed().as_secs_f64();
+    }
+
+    fn wake_group(&mut self, group: u32) -> Vec<usize> {
+        let mut woken = Vec::new();
+        for i in 0..self.bodies.len() {
+            if self.bodies[i].activity == Activity::Sleeping && self.sleep_group[i] == group {
+                self.bodies[i].activity = Activity::Awake;
+                self.sleep_timer[i] = 0.0;
+                woken.push(i);
+            }
+        }
+        if !woken.is_empty() {
+            self.counters.wakes += 1;
+        }
+        woken
+    }
+
+    /// Wakes resting systems touched during an impact; they join it at τ.
+    fn wake_touched(
+        &mut self,
+        touching: &[Touching],
+        seg: &mut [Segment],
+        tau: f64,
+        t0: f64,
+    ) -> Vec<usize> {
+        let mut woken = Vec::new();
+        for t in touching {
+            for id in [t.a, t.b] {
+                let i = id.index();
+                if self.bodies[i].activity == Activity::Sleeping {
+                    let g = self.sleep_group[i];
+                    woken.extend(self.wake_group(g));
+                }
+            }
+        }
+        for &i in &woken {
+            seg[i].time = tau;
+            let (f, t) = self.external(i, t0 + tau);
+            seg[i].force = f;
+            seg[i].torque = t;
+        }
+        woken.sort_unstable();
+        woken
+    }
+
+    /// A moving body touching a resting system at the end of a step wakes it
+    /// for the next step.
+    fn wake_touched_at_end(&mut self) {
+        let groups: Vec<u32> = self
+            .touching
+            .iter()
+            .flat_map(|t| {
+                let (a, b) = (t.a.index(), t.b.index());
+                let mut g = Vec::new();
+                if self.bodies[a].activity == Activity::Sleeping && self.moving(b) {
+                    g.push(self.sleep_group[a]);
+                }
+                if self.bodies[b].activity == Activity::Sleeping && self.moving(a) {
+                    g.push(self.sleep_group[b]);
+                }
+                g
+            })
+            .collect();
+        for g in groups {
+            self.wake_group(g);
+        }
+    }
+
+    fn wake_for_forces(&mut self, t0: f64, h: f64) {
+        let groups: Vec<u32> = self
+            .scene
+            .forces
+            .iter()
+            .filter(|w| {
+                let changes = |x: f64| x > t0 - h && x <= t0;
+                (changes(w.start) || changes(w.end))
+                    && self.bodies[w.body.index()].activity == Activity::Sleeping
+            })
+            .map(|w| self.sleep_group[w.body.index()])
+            .collect();
+        for g in groups {
+            self.wake_group(g);
+        }
+    }
+
+    /// Resting systems and falls (SPEC 2.6).
+    fn update_rest_and_falls(&mut self, h: f64) {
+        let fall_z = self.scene.settings.fall_z;
+        for i in 0..self.bodies.len() {
+            let b = &self.bodies[i];
+            if b.is_dynamic() && b.activity == Activity::Awake && b.state.position.z < fall_z {
+                self.bodies[i].activity = Activity::Fallen;
+                self.counters.bodies_fallen += 1;
+            }
+        }
+        if !self.sleep_enabled {
+            return;
+        }
+        let n = self.bodies.len();
+        for i in 0..n {
+            let b = &self.bodies[i];
+            if b.is_dynamic() && b.activity == Activity::Awake {
+                let w = b.angular_velocity(self.object(i));
+                if b.state.velocity.norm() < SLEEP_LINEAR && w.norm() < SLEEP_ANGULAR {
+                    self.sleep_timer[i] += h;
+                } else {
+                    self.sleep_timer[i] = 0.0;
+                }
+            }
+        }
+        // A system sleeps only as a whole, and never while it touches a moving driven body.
+        let links: Vec<(BodyId, BodyId)> = self.touching.iter().map(|t| (t.a, t.b)).collect();
+        let mut sets = island::DisjointSets::new(n);
+        let mut blocked = vec![false; n];
+        for &(a, b) in &links {
+            let (ia, ib) = (a.index(), b.index());
+            let dyn_a = self.bodies[ia].is_dynamic();
+            let dyn_b = self.bodies[ib].is_dynamic();
+            if dyn_a && dyn_b {
+                sets.union(a.0, b.0);
+            }
+            if matches!(self.bodies[ia].kind, BodyKind::Driven { .. }) {
+                blocked[ib] = true;
+            }
+            if matches!(self.bodies[ib].kind, BodyKind::Driven { .. }) {
+                blocked[ia] = true;
+            }
+        }
+        let mut ready: HashMap<u32, bool> = HashMap::new();
+        for i in 0..n {
+            let b = &self.bodies[i];
+            if !(b.is_dynamic() && b.activity == Activity::Awake) {
+                continue;
+            }
+            let root = sets.find(i as u32);
+            let ok = self.sleep_timer[i] >= self.sleep_after && !blocked[i];
+            let e = ready.entry(root).or_insert(true);
+            *e &= ok;
+        }
+        for i in 0..n {
+            let b = &self.bodies[i];
+            if !(b.is_dynamic() && b.activity == Activity::Awake) {
+                continue;
+            }
+            let root = sets.find(i as u32);
+            if ready.get(&root) == Some(&true) {
+                let body = &mut self.bodies[i];
+                body.activity = Activity::Sleeping;
+                body.state.velocity = Vector3::zeros();
+                body.state.angular_momentum = Vector3::zeros();
+                self.sleep_group[i] = root;
+            }
+        }
+    }
+
+    fn check_finite(&self, t: f64) -> Result<(), NumericalFailure> {
+        for (i, b) in self.bodies.iter().enumerate() {
+            let s = &b.state;
+            let finite = s.position.iter().all(|x| x.is_finite())
+                && s.velocity.iter().all(|x| x.is_finite())
+                && s.angular_momentum.iter().all(|x| x.is_finite())
+                && s.orientation.coords.iter().all(|x| x.is_finite());
+            if !finite {
+                return Err(NumericalFailure {
+                    body: BodyId(i as u32),
+                    stage: "integrate",
+                    time: t,
+                    detail: "has a non-finite state".into(),
+                });
+            }
+            if s.velocity.norm() > 1e6 {
+                return Err(NumericalFailure {
+                    body: BodyId(i as u32),
+                    stage: "solve_islands",
+                    time: t,
+                    detail: format!("exploded (speed {:.3e} m/s)", s.velocity.norm()),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// A 64-bit FNV-1a hash of the exact bits of every body's state, as hex.
+    pub fn state_hash(&self) -> String {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |x: f64| {
+            for byte in x.to_bits().to_le_bytes() {
+                h ^= byte as u64;
+                h = h.wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        };
+        for b in &self.bodies {
+            let s = &b.state;
+            s.position.iter().for_each(|&x| eat(x));
+            s.orientation.coords.iter().for_each(|&x| eat(x));
+            s.velocity.iter().for_each(|&x| eat(x));
+            s.angular_momentum.iter().for_each(|&x| eat(x));
+        }
+        format!("{h:016x}")
+    }
+
+    /// World point helper for tests.
+    pub fn world_point(&self, body: usize, local: Vector3<f64>) -> Vector3<f64> {
+        (self.bodies[body].pose() * Point3::from(local)).coords
+    }
+}

@@ -1,0 +1,973 @@
+//! V-Clip against an independent oracle (parry3d-f64's GJK/EPA) and against
+//! hand-built degenerate cases; polyhedron construction; contact manifolds.
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use parry3d_f64::math::{Pose as PPose, Rotation as PRot, Vector as PVec};
+use parry3d_f64::query;
+use parry3d_f64::shape::ConvexPolyhedron as ParryPoly;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rigidsim::collision::manifold::{ContactPoint, contact_points};
+use rigidsim::collision::polyhedron::{ConvexPolyhedron, PolyhedronError, weld};
+use rigidsim::collision::vclip::{
+    Feature, FeaturePair, Proximity, closest_features, closest_features_with_limit, exhaustive,
+};
+
+// ---------------------------------------------------------------- shapes
+
+fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
+    Vector3::new(x, y, z)
+}
+
+/// Box with half extents (hx, hy, hz), as 6 quads.
+fn cuboid(hx: f64, hy: f64, hz: f64) -> ConvexPolyhedron {
+    let (verts, quads) = cuboid_mesh(hx, hy, hz);
+    ConvexPolyhedron::from_faces(verts, quads).unwrap()
+}
+
+fn cuboid_mesh(hx: f64, hy: f64, hz: f64) -> (Vec<Vector3<f64>>, Vec<Vec<usize>>) {
+    let verts = (0..8)
+        .map(|i| {
+            v(
+                if i & 1 == 0 { -hx } else { hx },
+                if i & 2 == 0 { -hy } else { hy },
+                if i & 4 == 0 { -hz } else { hz },
+            )
+        })
+        .collect();
+    let quads = vec![
+        vec![0, 2, 3, 1], // z = -hz
+        vec![4, 5, 7, 6], // z = +hz
+        vec![0, 1, 5, 4], // y = -hy
+        vec![2, 6, 7, 3], // y = +hy
+        vec![0, 4, 6, 2], // x = -hx
+        vec![1, 3, 7, 5], // x = +hx
+    ];
+    (verts, quads)
+}
+
+fn cube_triangles() -> (Vec<Vector3<f64>>, Vec<Vec<usize>>) {
+    let (verts, quads) = cuboid_mesh(0.5, 0.5, 0.5);
+    let tris = quads
+        .iter()
+        .flat_map(|q| [vec![q[0], q[1], q[2]], vec![q[0], q[2], q[3]]])
+        .collect();
+    (verts, tris)
+}
+
+/// Right prism over a regular n-gon of circumradius r, height 2 hz.
+fn prism(n: usize, r: f64, hz: f64) -> ConvexPolyhedron {
+    let mut verts = Vec::new();
+    for z in [-hz, hz] {
+        for k in 0..n {
+            let t = std::f64::consts::TAU * k as f64 / n as f64;
+            verts.push(v(r * t.cos(), r * t.sin(), z));
+        }
+    }
+    let mut faces = vec![(0..n).rev().collect::<Vec<_>>(), (n..2 * n).collect()];
+    for k in 0..n {
+        let k1 = (k + 1) % n;
+        faces.push(vec![k, k1, n + k1, n + k]);
+    }
+    ConvexPolyhedron::from_faces(verts, faces).unwrap()
+}
+
+/// Hull of points spread evenly over a sphere (Fibonacci lattice): a
+/// geodesic-like polyhedron with about 2 n − 4 triangles.
+fn geodesic(n: usize, r: f64) -> ConvexPolyhedron {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let pts: Vec<_> = (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let rad = (1.0 - y * y).sqrt();
+            let t = golden * i as f64;
+            v(rad * t.cos(), y, rad * t.sin()) * r
+        })
+        .collect();
+    ConvexPolyhedron::hull(&pts).unwrap()
+}
+
+fn random_shape(rng: &mut ChaCha8Rng) -> ConvexPolyhedron {
+    let s = rng.random_range(0.3..1.5);
+    match rng.random_range(0..4) {
+        0 => cuboid(
+            s * rng.random_range(0.2..1.0),
+            s * rng.random_range(0.2..1.0),
+            s * rng.random_range(0.2..1.0),
+        ),
+        1 => prism(rng.random_range(3..12), s, s * rng.random_range(0.1..1.0)),
+        _ => {
+            let n = rng.random_range(4..40);
+            let scale = v(
+                rng.random_range(0.3..1.0),
+                rng.random_range(0.3..1.0),
+                rng.random_range(0.3..1.0),
+            ) * s;
+            let pts: Vec<_> = (0..n)
+                .map(|_| {
+                    v(
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                    )
+                    .component_mul(&scale)
+                })
+                .collect();
+            ConvexPolyhedron::hull(&pts).unwrap()
+        }
+    }
+}
+
+fn random_rotation(rng: &mut ChaCha8Rng) -> UnitQuaternion<f64> {
+    let q = nalgebra::Quaternion::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    );
+    UnitQuaternion::from_quaternion(q)
+}
+
+fn random_direction(rng: &mut ChaCha8Rng) -> Vector3<f64> {
+    loop {
+        let d = v(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        if d.norm() > 0.1 && d.norm() <= 1.0 {
+            return d.normalize();
+        }
+    }
+}
+
+fn pose(t: Vector3<f64>, r: UnitQuaternion<f64>) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::from(t), r)
+}
+
+fn at(x: f64, y: f64, z: f64) -> Isometry3<f64> {
+    Isometry3::translation(x, y, z)
+}
+
+// ---------------------------------------------------------------- oracle
+
+struct Oracle {
+    shape_a: ParryPoly,
+    shape_b: ParryPoly,
+}
+
+fn to_parry(p: &ConvexPolyhedron) -> ParryPoly {
+    let pts: Vec<PVec> = p
+        .vertices()
+        .iter()
+        .map(|x| PVec::new(x.x, x.y, x.z))
+        .collect();
+    ParryPoly::from_convex_hull(&pts).unwrap()
+}
+
+fn to_pose(iso: &Isometry3<f64>) -> PPose {
+    let t = iso.translation.vector;
+    let q = iso.rotation.quaternion();
+    PPose::from_parts(
+        PVec::new(t.x, t.y, t.z),
+        PRot::from_xyzw(q.i, q.j, q.k, q.w),
+    )
+}
+
+impl Oracle {
+    fn new(a: &ConvexPolyhedron, b: &ConvexPolyhedron) -> Self {
+        Oracle {
+            shape_a: to_parry(a),
+            shape_b: to_parry(b),
+        }
+    }
+
+    /// parry's distance (0 when overlapping) and signed contact distance
+    /// (negative when overlapping).
+    fn query(&self, pa: &Isometry3<f64>, pb: &Isometry3<f64>) -> (f64, f64) {
+        let (pa, pb) = (to_pose(pa), to_pose(pb));
+        let d = query::distance(&pa, &self.shape_a, &pb, &self.shape_b)
+            .unwrap()
+            .distance;
+        let signed = query::contact(&pa, &self.shape_a, &pb, &self.shape_b, 0.0)
+            .unwrap()
+            .map_or(d, |c| c.dist);
+        (d, signed)
+    }
+}
+
+/// Largest signed distance of `x` (world) outside `p` at `pose`.
+fn outside(p: &ConvexPolyhedron, pose: &Isometry3<f64>, x: &Vector3<f64>) -> f64 {
+    let local = pose.inverse_transform_point(&(*x).into()).coords;
+    p.faces()
+        .iter()
+        .map(|f| f.normal.dot(&local) - f.offset)
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Checks a separated answer's self-consistency: the witness points lie on
+/// their polyhedra and are `distance` apart.
+fn assert_consistent(
+    a: &ConvexPolyhedron,
+    pa: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pb: &Isometry3<f64>,
+    r: &Proximity,
+) {
+    let size = a.scale().max(b.scale());
+    assert!(
+        ((r.point_a - r.point_b).norm() - r.distance.abs()).abs() <= 1e-12 * size,
+        "{r:?}"
+    );
+    assert!(
+        outside(a, pa, &r.point_a) <= 1e-9 * size,
+        "point_a off A: {r:?}"
+    );
+    assert!(
+        outside(b, pb, &r.point_b) <= 1e-9 * size,
+        "point_b off B: {r:?}"
+    );
+}
+
+/// 2000 random pairs (boxes, prisms, hulls of 4–40 random points; random
+/// rotations; centres 0–2.5 sizes apart, so about a third overlap).
+/// Distance agrees with parry to 1e-9 relative plus 1e-12 of the body size
+/// (GJK's own stopping slack); the penetration flag agrees except within
+/// 1e-9 of the body size of touching, where either answer is right.
+#[test]
+fn random_pairs_agree_with_parry_distance_and_overlap() {
+    let mut rng = ChaCha8Rng::seed_from_u64(20240601);
+    let (mut separated, mut overlapping, mut fell_back) = (0, 0, 0);
+    let mut worst_rel: f64 = 0.0;
+    for case in 0..2000 {
+        let a = random_shape(&mut rng);
+        let b = random_shape(&mut rng);
+        let pa = pose(
+            random_direction(&mut rng) * rng.random_range(0.0..0.5),
+            random_rotation(&mut rng),
+        );
+        let reach = a.bounding_sphere().1 + b.bounding_sphere().1;
+        let pb = pose(
+            pa.translation.vector + random_direction(&mut rng) * rng.random_range(0.0..1.2) * reach,
+            random_rotation(&mut rng),
+        );
+        let r = closest_features(&a, &pa, &b, &pb, None);
+        let (d, signed) = Oracle::new(&a, &b).query(&pa, &pb);
+        let size = a.scale().max(b.scale());
+        fell_back += r.fell_back as u32;
+        if signed.abs() > 1e-9 * size {
+            assert_eq!(
+                r.penetrating,
+                signed < 0.0,
+                "case {case}: vclip {r:?}, parry {signed}"
+            );
+        }
+        if r.penetrating {
+            overlapping += 1;
+            assert!(r.distance <= 0.0);
+            continue;
+        }
+        separated += 1;
+        assert_consistent(&a, &pa, &b, &pb, &r);
+        let err = (r.distance - d).abs();
+        worst_rel = worst_rel.max(err / d.max(1e-300));
+        assert!(
+            err <= 1e-9 * d + 1e-12 * size,
+            "case {case}: vclip {} parry {d}: {r:?}",
+            r.distance
+        );
+    }
+    println!(
+        "separated {separated}, overlapping {overlapping}, fell back {fell_back}, worst relative error {worst_rel:e}"
+    );
+    assert!(separated > 500 && overlapping > 300);
+    assert_eq!(
+        fell_back, 0,
+        "the walk should converge on generic random input"
+    );
+}
+
+/// The exhaustive search is the fallback's answer: check it against V-Clip
+/// on the same random pairs, overlapping ones included.
+#[test]
+fn exhaustive_search_agrees_with_vclip() {
+    let mut rng = ChaCha8Rng::seed_from_u64(99);
+    for case in 0..300 {
+        let a = random_shape(&mut rng);
+        let b = random_shape(&mut rng);
+        let pa = pose(v(0.0, 0.0, 0.0), random_rotation(&mut rng));
+        let reach = a.bounding_sphere().1 + b.bounding_sphere().1;
+        let pb = pose(
+            random_direction(&mut rng) * rng.random_range(0.0..1.2) * reach,
+            random_rotation(&mut rng),
+        );
+        let r = closest_features(&a, &pa, &b, &pb, None);
+        let x = exhaustive(&a, &pa, &b, &pb);
+        let size = a.scale().max(b.scale());
+        if x.distance.abs() > 1e-9 * size {
+            assert_eq!(r.penetrating, x.penetrating, "case {case}");
+        }
+        if !r.penetrating {
+            assert!(
+                (r.distance - x.distance).abs() <= 1e-12 * size,
+                "case {case}: {r:?} {x:?}"
+            );
+            assert_consistent(&a, &pa, &b, &pb, &x);
+        }
+    }
+}
+
+/// The iteration bound (cycle guard) forced down to 0–3 states: the fallback
+/// answer must match the unbounded walk.
+#[test]
+fn cycle_guard_fallback_still_answers_correctly() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut fallbacks = 0;
+    for case in 0..300 {
+        let a = random_shape(&mut rng);
+        let b = random_shape(&mut rng);
+        let pa = pose(v(0.0, 0.0, 0.0), random_rotation(&mut rng));
+        let reach = a.bounding_sphere().1 + b.bounding_sphere().1;
+        let pb = pose(
+            random_direction(&mut rng) * rng.random_range(0.0..1.2) * reach,
+            random_rotation(&mut rng),
+        );
+        let full = closest_features(&a, &pa, &b, &pb, None);
+        let limit = rng.random_range(0..4);
+        let cut = closest_features_with_limit(&a, &pa, &b, &pb, None, limit);
+        assert!(cut.iterations <= limit);
+        if !cut.fell_back {
+            continue;
+        }
+        fallbacks += 1;
+        let size = a.scale().max(b.scale());
+        if full.distance.abs() > 1e-9 * size {
+            assert_eq!(cut.penetrating, full.penetrating, "case {case}");
+        }
+        if !full.penetrating {
+            assert!(
+                (cut.distance - full.distance).abs() <= 1e-12 * size,
+                "case {case}: {cut:?} {full:?}"
+            );
+        } else {
+            assert!(cut.distance <= 0.0);
+        }
+    }
+    assert!(fallbacks > 200);
+}
+
+/// Coherence: a pair moved by 1e-3 of its size and rotated by 1e-3 rad,
+/// warm-started from the previous features, gives the cold answer (to 1e-12
+/// of the size) in fewer states on average.
+#[test]
+fn warm_start_after_small_motion_matches_cold_in_fewer_iterations() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let (mut warm_total, mut cold_total, mut compared) = (0u64, 0u64, 0);
+    for _ in 0..400 {
+        let a = if rng.random_bool(0.5) {
+            geodesic(60, 1.0)
+        } else {
+            random_shape(&mut rng)
+        };
+        let b = random_shape(&mut rng);
+        let pa = pose(v(0.0, 0.0, 0.0), random_rotation(&mut rng));
+        let reach = a.bounding_sphere().1 + b.bounding_sphere().1;
+        let mut pb = pose(
+            random_direction(&mut rng) * rng.random_range(0.8..1.3) * reach,
+            random_rotation(&mut rng),
+        );
+        let mut cached = closest_features(&a, &pa, &b, &pb, None).features;
+        for _ in 0..5 {
+            let nudge = random_direction(&mut rng) * 1e-3 * reach;
+            let turn = UnitQuaternion::from_scaled_axis(random_direction(&mut rng) * 1e-3);
+            pb = pose(pb.translation.vector + nudge, turn * pb.rotation);
+            let warm = closest_features(&a, &pa, &b, &pb, Some(cached));
+            let cold = closest_features(&a, &pa, &b, &pb, None);
+            assert_eq!(warm.penetrating, cold.penetrating);
+            if !cold.penetrating {
+                assert!(
+                    (warm.distance - cold.distance).abs() <= 1e-12 * reach,
+                    "{warm:?} {cold:?}"
+                );
+                warm_total += warm.iterations as u64;
+                cold_total += cold.iterations as u64;
+                compared += 1;
+            }
+            cached = warm.features;
+        }
+    }
+    println!(
+        "{compared} re-queries: warm {:.2} states on average, cold {:.2}",
+        warm_total as f64 / compared as f64,
+        cold_total as f64 / compared as f64
+    );
+    assert!(compared > 1000);
+    assert!(warm_total < cold_total);
+}
+
+#[test]
+fn stale_or_invalid_warm_starts_do_not_panic() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    let b = prism(7, 0.6, 0.3);
+    let (pa, pb) = (at(0.0, 0.0, 0.0), at(0.3, 0.2, 1.5));
+    let cold = closest_features(&a, &pa, &b, &pb, None);
+    let bad = [
+        FeaturePair {
+            a: Feature::Vertex(8),
+            b: Feature::Vertex(0),
+        },
+        FeaturePair {
+            a: Feature::Edge(12),
+            b: Feature::Edge(0),
+        },
+        FeaturePair {
+            a: Feature::Face(0),
+            b: Feature::Face(99),
+        },
+        FeaturePair {
+            a: Feature::Face(u32::MAX),
+            b: Feature::Vertex(u32::MAX),
+        },
+        FeaturePair {
+            a: Feature::Face(3),
+            b: Feature::Face(2),
+        },
+        FeaturePair {
+            a: Feature::Edge(11),
+            b: Feature::Face(8),
+        },
+        FeaturePair {
+            a: Feature::Face(5),
+            b: Feature::Edge(20),
+        },
+    ];
+    for start in bad {
+        let r = closest_features(&a, &pa, &b, &pb, Some(start));
+        assert!(
+            (r.distance - cold.distance).abs() < 1e-12,
+            "{start:?}: {r:?}"
+        );
+    }
+}
+
+// ---------------------------------------------------------------- degenerate
+
+/// Exactly parallel, coincident faces: a 1 m cube centred 1 m above another.
+#[test]
+fn box_on_box_with_coincident_faces_touches_at_zero_distance() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    for (x, y) in [(0.0, 0.0), (0.25, -0.1), (1.0, 0.0), (1.0, 1.0)] {
+        let r = closest_features(&a, &at(x, y, 1.0), &a, &at(0.0, 0.0, 0.0), None);
+        assert!(!r.penetrating || r.distance == 0.0, "{r:?}");
+        assert!(r.distance.abs() < 1e-15, "{r:?}");
+    }
+}
+
+/// Parallel faces with a gap, stacked exactly and offset, all starts.
+#[test]
+fn parallel_faces_give_the_gap() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    let b = cuboid(2.0, 2.0, 0.5);
+    for gap in [1e-9, 1e-3, 0.37] {
+        for (x, y) in [(0.0, 0.0), (1.5, 1.5), (2.0, 0.3), (2.5, 0.0)] {
+            for start in [
+                None,
+                Some(FeaturePair {
+                    a: Feature::Face(0),
+                    b: Feature::Vertex(7),
+                }),
+            ] {
+                let pa = at(x, y, 1.0 + gap);
+                let r = closest_features(&a, &pa, &b, &at(0.0, 0.0, 0.0), start);
+                assert!(!r.penetrating);
+                assert!((r.distance - gap).abs() < 1e-12, "{x} {y} {gap}: {r:?}");
+            }
+        }
+    }
+}
+
+/// Parallel edges: two cubes turned 45° about x, edge above edge.
+#[test]
+fn parallel_edges_give_the_gap() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    let turn = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_4);
+    let h = 0.5 * 2f64.sqrt();
+    for gap in [0.0, 1e-6, 0.2] {
+        for shift in [0.0, 0.6, 0.99] {
+            let r = closest_features(
+                &a,
+                &pose(v(shift, 0.0, 2.0 * h + gap), turn),
+                &a,
+                &pose(v(0.0, 0.0, 0.0), turn),
+                None,
+            );
+            assert!((r.distance - gap).abs() < 1e-12, "{gap} {shift}: {r:?}");
+        }
+    }
+}
+
+/// A cube balanced on a corner over a face, touching and just above.
+#[test]
+fn vertex_on_face() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    let floor = cuboid(3.0, 3.0, 0.5);
+    // Rotate the (-,-,-) corner to point straight down.
+    let down = UnitQuaternion::rotation_between(&v(-1.0, -1.0, -1.0), &v(0.0, 0.0, -1.0)).unwrap();
+    let h = 0.5 * 3f64.sqrt();
+    for gap in [0.0, 1e-10, 0.05] {
+        let r = closest_features(
+            &a,
+            &pose(v(0.2, -0.1, 0.5 + h + gap), down),
+            &floor,
+            &at(0.0, 0.0, 0.0),
+            None,
+        );
+        assert!((r.distance - gap).abs() < 1e-12, "{gap}: {r:?}");
+        if gap > 0.0 {
+            assert!(
+                matches!(
+                    r.features,
+                    FeaturePair {
+                        a: Feature::Vertex(_),
+                        b: Feature::Face(_)
+                    }
+                ),
+                "{r:?}"
+            );
+        }
+    }
+}
+
+/// Two cubes meeting corner to corner along their diagonal.
+#[test]
+fn touching_at_a_single_point() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    let r = closest_features(&a, &at(1.0, 1.0, 1.0), &a, &at(0.0, 0.0, 0.0), None);
+    assert_eq!(r.distance, 0.0);
+    assert!((r.point_a - v(0.5, 0.5, 0.5)).norm() < 1e-15);
+    let r = closest_features(&a, &at(1.1, 1.1, 1.1), &a, &at(0.0, 0.0, 0.0), None);
+    assert!((r.distance - 0.1 * 3f64.sqrt()).abs() < 1e-14);
+    let corner = |x: Vector3<f64>| {
+        Feature::Vertex(a.vertices().iter().position(|p| *p == x).unwrap() as u32)
+    };
+    assert_eq!(
+        r.features,
+        FeaturePair {
+            a: corner(v(-0.5, -0.5, -0.5)),
+            b: corner(v(0.5, 0.5, 0.5))
+        }
+    );
+}
+
+/// Identical polyhedra at the same pose, and one swallowed by another.
+#[test]
+fn identical_and_nested_polyhedra_penetrate() {
+    let shapes = [cuboid(0.5, 0.5, 0.5), prism(9, 0.5, 0.2), geodesic(80, 0.7)];
+    for s in &shapes {
+        let p = pose(
+            v(0.3, -1.0, 2.0),
+            UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3),
+        );
+        let r = closest_features(s, &p, s, &p, None);
+        assert!(r.penetrating && r.distance <= 0.0, "{r:?}");
+    }
+    let big = cuboid(2.0, 2.0, 2.0);
+    let small = geodesic(40, 0.3);
+    let r = closest_features(&small, &at(0.1, 0.2, 0.3), &big, &at(0.0, 0.0, 0.0), None);
+    assert!(r.penetrating);
+    let r = closest_features(&big, &at(0.0, 0.0, 0.0), &small, &at(0.1, 0.2, 0.3), None);
+    assert!(r.penetrating);
+}
+
+// ---------------------------------------------------------------- construction
+
+#[test]
+fn cube_from_twelve_triangles_merges_to_six_quads() {
+    let (verts, tris) = cube_triangles();
+    let p = ConvexPolyhedron::from_faces(verts, tris).unwrap();
+    assert_eq!(p.face_count(), 6);
+    assert_eq!(p.edges().len(), 12);
+    assert_eq!(p.vertices().len(), 8);
+    assert!(p.faces().iter().all(|f| f.vertices.len() == 4));
+    for f in p.faces() {
+        for &i in &f.vertices {
+            assert!((f.normal.dot(&p.vertices()[i]) - f.offset).abs() < 1e-15);
+        }
+        assert!((f.offset - 0.5).abs() < 1e-15);
+    }
+    assert_eq!(p.triangles().len(), 12);
+}
+
+#[test]
+fn collinear_and_interior_vertices_of_merged_faces_are_dropped() {
+    // A cube whose top face is split through an extra vertex in its middle
+    // and one on an edge midpoint: 8 corners survive.
+    let (mut verts, mut quads) = cuboid_mesh(0.5, 0.5, 0.5);
+    verts.push(v(0.0, 0.0, 0.5)); // 8: top centre
+    verts.push(v(0.5, 0.0, 0.5)); // 9: midpoint of top edge 5-7
+    quads[1] = vec![4, 5, 8];
+    quads.push(vec![5, 9, 8]);
+    quads.push(vec![9, 7, 8]);
+    quads.push(vec![7, 6, 8]);
+    quads.push(vec![6, 4, 8]);
+    quads[5] = vec![1, 3, 7, 9, 5]; // x = +0.5 face now runs through 9
+    let p = ConvexPolyhedron::from_faces(verts, quads).unwrap();
+    assert_eq!(
+        (p.vertices().len(), p.edges().len(), p.face_count()),
+        (8, 12, 6)
+    );
+}
+
+#[test]
+fn triangle_soup_works_after_welding() {
+    let (verts, tris) = cube_triangles();
+    let mut soup_v = Vec::new();
+    let mut soup_f = Vec::new();
+    for t in &tris {
+        soup_f.push((0..3).map(|k| soup_v.len() + k).collect());
+        soup_v.extend(t.iter().map(|&i| verts[i]));
+    }
+    assert!(matches!(
+        ConvexPolyhedron::from_faces(soup_v.clone(), soup_f.clone()),
+        Err(PolyhedronError::OpenEdge { .. })
+    ));
+    let (wv, wf) = weld(&soup_v, &soup_f, 1e-9);
+    let p = ConvexPolyhedron::from_faces(wv, wf).unwrap();
+    assert_eq!((p.vertices().len(), p.face_count()), (8, 6));
+}
+
+#[test]
+fn l_shaped_prism_is_rejected_as_not_convex() {
+    // L-shaped cross-section in xy, extruded along z.
+    let outline = [
+        v(0.0, 0.0, 0.0),
+        v(2.0, 0.0, 0.0),
+        v(2.0, 1.0, 0.0),
+        v(1.0, 1.0, 0.0),
+        v(1.0, 2.0, 0.0),
+        v(0.0, 2.0, 0.0),
+    ];
+    let n = outline.len();
+    let mut verts: Vec<_> = outline.to_vec();
+    verts.extend(outline.iter().map(|p| p + v(0.0, 0.0, 1.0)));
+    let mut faces = vec![(0..n).rev().collect::<Vec<_>>(), (n..2 * n).collect()];
+    for k in 0..n {
+        faces.push(vec![k, (k + 1) % n, n + (k + 1) % n, n + k]);
+    }
+    let err = ConvexPolyhedron::from_faces(verts, faces).unwrap_err();
+    let PolyhedronError::NotConvex {
+        vertex,
+        face,
+        distance,
+    } = err
+    else {
+        panic!("{err:?}");
+    };
+    // The worst offenders lie 1 m outside a face at the notch: the corners
+    // at y = 2 outside face 4 (y = 1, x ∈ [1, 2]), or those at x = 2
+    // outside face 5 (x = 1, y ∈ [1, 2]).
+    assert!((distance - 1.0).abs() < 1e-12);
+    let outside_4 = [4, 5, 10, 11].contains(&vertex) && face == 4;
+    let outside_5 = [1, 2, 7, 8].contains(&vertex) && face == 5;
+    assert!(outside_4 || outside_5, "{vertex} {face}");
+    let msg = format!("part 'bracket': {err}");
+    assert_eq!(
+        msg,
+        format!("part 'bracket': is not convex: vertex {vertex} lies 1.0000 m outside face {face}")
+    );
+}
+
+#[test]
+fn cube_with_a_dented_corner_is_rejected_naming_vertex_and_face() {
+    let (mut verts, tris) = cube_triangles();
+    verts[7] = v(0.1, 0.1, 0.1);
+    let err = ConvexPolyhedron::from_faces(verts, tris).unwrap_err();
+    assert!(matches!(err, PolyhedronError::NotConvex { .. }), "{err:?}");
+    assert!(
+        err.to_string().starts_with("is not convex: vertex "),
+        "{err}"
+    );
+}
+
+#[test]
+fn open_inward_flat_and_inconsistent_meshes_are_rejected() {
+    let (verts, mut tris) = cube_triangles();
+    let full = tris.clone();
+    tris.pop();
+    let err = ConvexPolyhedron::from_faces(verts.clone(), tris).unwrap_err();
+    assert!(matches!(err, PolyhedronError::OpenEdge { .. }), "{err:?}");
+    assert!(err.to_string().starts_with("is not closed"));
+
+    let inward: Vec<Vec<usize>> = full
+        .iter()
+        .map(|t| t.iter().rev().copied().collect())
+        .collect();
+    let err = ConvexPolyhedron::from_faces(verts.clone(), inward).unwrap_err();
+    assert!(
+        matches!(err, PolyhedronError::InwardWinding { .. }),
+        "{err:?}"
+    );
+
+    let flat = vec![v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(0.0, 1.0, 0.0)];
+    let err = ConvexPolyhedron::from_faces(flat, vec![vec![0, 1, 2], vec![0, 2, 1]]).unwrap_err();
+    assert!(matches!(err, PolyhedronError::ZeroVolume { .. }), "{err:?}");
+
+    let mut flipped = full.clone();
+    flipped[3].reverse();
+    let err = ConvexPolyhedron::from_faces(verts.clone(), flipped).unwrap_err();
+    assert!(
+        matches!(err, PolyhedronError::InconsistentWinding { .. }),
+        "{err:?}"
+    );
+
+    let mut bad = full.clone();
+    bad[0] = vec![0, 1];
+    assert!(matches!(
+        ConvexPolyhedron::from_faces(verts.clone(), bad),
+        Err(PolyhedronError::TooFewFaceVertices { face: 0, count: 2 })
+    ));
+    let mut bad = full;
+    bad[2][1] = 42;
+    assert!(matches!(
+        ConvexPolyhedron::from_faces(verts.clone(), bad),
+        Err(PolyhedronError::IndexOutOfRange { index: 42, .. })
+    ));
+    let mut nan = verts;
+    nan[3].y = f64::NAN;
+    assert!(matches!(
+        ConvexPolyhedron::from_faces(nan, cube_triangles().1),
+        Err(PolyhedronError::NonFinite { vertex: 3 })
+    ));
+}
+
+#[test]
+fn hull_contains_its_points_and_is_convex() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for n in [4, 5, 10, 50, 300] {
+        for _ in 0..10 {
+            let pts: Vec<_> = (0..n)
+                .map(|_| {
+                    v(
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-2.0..2.0),
+                        rng.random_range(-0.5..0.5),
+                    )
+                })
+                .collect();
+            let p = ConvexPolyhedron::hull(&pts).unwrap();
+            let tol = 1e-9 * p.scale();
+            for x in &pts {
+                assert!(outside(&p, &Isometry3::identity(), x) <= tol);
+            }
+            for f in p.faces() {
+                for x in p.vertices() {
+                    assert!(f.normal.dot(x) - f.offset <= tol);
+                }
+            }
+            for e in p.edges() {
+                // Convex dihedral: the right face's far vertices lie under the left plane.
+                let nl = p.faces()[e.left as usize].normal;
+                let nr = p.faces()[e.right as usize].normal;
+                assert!(
+                    nl.cross(&nr)
+                        .dot(&p.edge_direction(p.edges().iter().position(|x| x == e).unwrap()))
+                        > 0.0
+                );
+            }
+            let euler = p.vertices().len() as i64 - p.edges().len() as i64 + p.face_count() as i64;
+            assert_eq!(euler, 2);
+        }
+    }
+}
+
+#[test]
+fn hull_merges_coplanar_points_and_rejects_flat_input() {
+    // Box corners plus points on its faces and inside: 6 faces.
+    let mut pts: Vec<_> = cuboid_mesh(1.0, 0.5, 0.25).0;
+    pts.extend([
+        v(0.0, 0.0, 0.25),
+        v(1.0, 0.1, 0.0),
+        v(0.2, -0.5, 0.1),
+        v(0.0, 0.0, 0.0),
+        v(0.5, 0.5, 0.25),
+    ]);
+    let p = ConvexPolyhedron::hull(&pts).unwrap();
+    assert_eq!((p.vertices().len(), p.face_count()), (8, 6));
+
+    let err = ConvexPolyhedron::hull(&[v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(0.0, 1.0, 0.0)])
+        .unwrap_err();
+    assert_eq!(err, PolyhedronError::TooFewPoints { count: 3 });
+    let flat: Vec<_> = (0..10).map(|i| v(i as f64, (i * i) as f64, 0.0)).collect();
+    assert_eq!(
+        ConvexPolyhedron::hull(&flat).unwrap_err(),
+        PolyhedronError::DegenerateHull { shape: "coplanar" }
+    );
+    let line: Vec<_> = (0..10).map(|i| v(i as f64, 2.0 * i as f64, 0.0)).collect();
+    assert_eq!(
+        ConvexPolyhedron::hull(&line).unwrap_err(),
+        PolyhedronError::DegenerateHull { shape: "collinear" }
+    );
+}
+
+#[test]
+fn geodesic_sphere_has_two_hundred_triangles() {
+    let g = geodesic(102, 1.0);
+    assert_eq!(g.face_count(), 200);
+    let (c, r) = g.bounding_sphere();
+    assert!(c.norm() < 0.05 && (r - 1.0).abs() < 0.05);
+}
+
+// ---------------------------------------------------------------- manifold
+
+const TOL: f64 = 1e-4;
+
+fn contacts(
+    a: &ConvexPolyhedron,
+    pa: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pb: &Isometry3<f64>,
+) -> Vec<ContactPoint> {
+    let prox = closest_features(a, pa, b, pb, None);
+    contact_points(a, pa, b, pb, &prox, TOL)
+}
+
+fn assert_points(got: &[ContactPoint], want: &[Vector3<f64>], normal: Vector3<f64>, sep: f64) {
+    assert_eq!(got.len(), want.len(), "{got:#?}");
+    for w in want {
+        let c = got
+            .iter()
+            .find(|c| (c.point - w).norm() < 1e-9)
+            .unwrap_or_else(|| panic!("no point at {w:?} in {got:#?}"));
+        assert!((c.normal - normal).norm() < 1e-12, "{c:?}");
+        assert!((c.separation - sep).abs() < 1e-12, "{c:?}");
+    }
+}
+
+/// Floor: 10 × 10 × 1 m box whose top face is z = 0.
+fn floor() -> (ConvexPolyhedron, Isometry3<f64>) {
+    (cuboid(5.0, 5.0, 0.5), at(0.0, 0.0, -0.5))
+}
+
+#[test]
+fn box_resting_flat_gives_its_four_corners() {
+    let (fl, pf) = floor();
+    let a = cuboid(0.5, 0.5, 0.5);
+    let corners = [
+        v(0.5, 0.5, 0.0),
+        v(-0.5, 0.5, 0.0),
+        v(0.5, -0.5, 0.0),
+        v(-0.5, -0.5, 0.0),
+    ];
+    for gap in [0.0, 5e-5, -1e-7] {
+        let got = contacts(&a, &at(0.0, 0.0, 0.5 + gap), &fl, &pf);
+        let want: Vec<_> = corners.iter().map(|c| c + v(0.0, 0.0, gap / 2.0)).collect();
+        assert_points(&got, &want, Vector3::z(), gap);
+        // Swapping the bodies flips the normal (out of B towards A).
+        let got = contacts(&fl, &pf, &a, &at(0.0, 0.0, 0.5 + gap));
+        assert_points(&got, &want, -Vector3::z(), gap);
+    }
+    assert!(contacts(&a, &at(0.0, 0.0, 0.5 + 2.0 * TOL), &fl, &pf).is_empty());
+}
+
+#[test]
+fn box_resting_flat_within_the_face_angle_still_gives_four_corners() {
+    let (fl, pf) = floor();
+    let a = cuboid(0.5, 0.5, 0.5);
+    // Tilted by 1e-5 rad: the far edge gapes 1e-5 m < TOL.
+    let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 1e-5);
+    let low = (tilt * v(0.5, -0.5, -0.5))
+        .z
+        .min((tilt * v(0.5, 0.5, -0.5)).z);
+    let got = contacts(&a, &pose(v(0.0, 0.0, -low), tilt), &fl, &pf);
+    assert_eq!(got.len(), 4, "{got:#?}");
+    // Tilted by 5e-3 rad (inside the face angle): the far edge gapes 5 mm and
+    // is dropped, leaving the touching edge.
+    let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 5e-3);
+    let low = (tilt * v(0.5, -0.5, -0.5))
+        .z
+        .min((tilt * v(0.5, 0.5, -0.5)).z);
+    let got = contacts(&a, &pose(v(0.0, 0.0, -low), tilt), &fl, &pf);
+    assert_eq!(got.len(), 2, "{got:#?}");
+}
+
+#[test]
+fn box_on_its_edge_gives_two_points() {
+    let (fl, pf) = floor();
+    let a = cuboid(0.5, 0.5, 0.5);
+    let turn = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_4);
+    let h = 0.5 * 2f64.sqrt();
+    for gap in [0.0, 3e-5, -2e-7] {
+        let got = contacts(&a, &pose(v(0.3, 0.0, h + gap), turn), &fl, &pf);
+        assert_points(
+            &got,
+            &[v(0.8, 0.0, gap / 2.0), v(-0.2, 0.0, gap / 2.0)],
+            Vector3::z(),
+            gap,
+        );
+    }
+}
+
+#[test]
+fn box_on_a_corner_gives_one_point() {
+    let (fl, pf) = floor();
+    let a = cuboid(0.5, 0.5, 0.5);
+    let tilt = UnitQuaternion::from_euler_angles(0.5, 0.3, 0.2);
+    let lowest = a
+        .vertices()
+        .iter()
+        .map(|x| tilt * x)
+        .min_by(|p, q| p.z.total_cmp(&q.z))
+        .unwrap();
+    for gap in [0.0, 5e-5, -1e-7] {
+        let c = v(0.1, 0.2, -lowest.z + gap);
+        let got = contacts(&a, &pose(c, tilt), &fl, &pf);
+        let want = c + lowest - v(0.0, 0.0, gap / 2.0);
+        assert_points(&got, &[want], Vector3::z(), gap);
+    }
+}
+
+#[test]
+fn box_on_a_larger_box_off_centre_gives_the_overlap_rectangle() {
+    let big = cuboid(2.0, 2.0, 0.5);
+    let a = cuboid(0.5, 0.5, 0.5);
+    // A spans x ∈ [1.2, 2.2], y ∈ [-0.2, 0.8]; B's top spans [-2, 2]².
+    for gap in [0.0, -1e-8] {
+        let got = contacts(&a, &at(1.7, 0.3, 1.0 + gap), &big, &at(0.0, 0.0, 0.0));
+        let z = 0.5 + gap / 2.0;
+        assert_points(
+            &got,
+            &[
+                v(1.2, -0.2, z),
+                v(2.0, -0.2, z),
+                v(2.0, 0.8, z),
+                v(1.2, 0.8, z),
+            ],
+            Vector3::z(),
+            gap,
+        );
+    }
+}
+
+#[test]
+fn crossed_edges_give_one_point_and_parallel_edges_two() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    let about_x = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_4);
+    let about_y = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_4);
+    let h = 0.5 * 2f64.sqrt();
+    // A's lowest edge along x crosses B's highest edge along y.
+    let got = contacts(
+        &a,
+        &pose(v(0.0, 0.0, 2.0 * h), about_x),
+        &a,
+        &pose(v(0.0, 0.0, 0.0), about_y),
+    );
+    assert_points(&got, &[v(0.0, 0.0, h)], Vector3::z(), 0.0);
+    // Both along x, A shifted by 0.4 m: the common stretch x ∈ [-0.1, 0.5].
+    let got = contacts(
+        &a,
+        &pose(v(0.4, 0.0, 2.0 * h), about_x),
+        &a,
+        &pose(v(0.0, 0.0, 0.0), about_x),
+    );
+    assert_points(&got, &[v(-0.1, 0.0, h), v(0.5, 0.0, h)], Vector3::z(), 0.0);
+}
