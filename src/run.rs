@@ -384,6 +384,8 @@ pub fn run_coordinator(
     traj.sample(world.time(), &world.bodies, &world.scene.objects)
         .map_err(|e| io(e, "trajectory.csv"))?;
     traj.flush().map_err(|e| io(e, "trajectory.csv"))?;
+    // Simulation time ends here; waiting for the renderer to drain is render time.
+    let wall = started.elapsed().as_secs_f64();
     let clock = Instant::now();
     let (frames_rendered, frames_dropped, adapter, mut notes) = if render_stride.is_some() {
         frames.finish(frame_of(&world, frame_index))
@@ -394,7 +396,6 @@ pub fn run_coordinator(
     let (mut per_rank, distributed) = exec.finish();
     per_rank.extend(frames.rank_summary());
     world.stage.communication = per_rank.first().map_or(0.0, |r| r.waiting_s);
-    let wall = started.elapsed().as_secs_f64();
     for (size, e) in world.counters.solve.failures.iter().take(5) {
         notes.push(format!(
             "LCP solve of {size} rows failed ({e}); used projected Gauss-Seidel"

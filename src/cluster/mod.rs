@@ -22,7 +22,7 @@ use mpi::request::{Request, StaticScope};
 use mpi::topology::{Communicator, SimpleCommunicator};
 use protocol::{RenderMessage, RenderReport, Reply, Request as Req, WorkerReport, decode, encode};
 use schedule::CostModel;
-use std::collections::BTreeMap;
+use std::collections::VecDeque;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -470,8 +470,12 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
     }
 }
 
-/// Frames queued towards the renderer beyond which new frames are dropped.
-const MAX_FRAMES_IN_FLIGHT: usize = 4;
+/// Frames the renderer holds at most; beyond this the oldest are dropped
+/// (and counted), so a slow renderer never queues without bound.
+pub const RENDER_QUEUE: usize = 64;
+/// Sends rank 0 keeps in flight at most (MPI copies small frames eagerly, so
+/// this bounds rank 0's buffers; the renderer's queue bounds the backlog).
+const MAX_FRAMES_IN_FLIGHT: usize = 64;
 
 /// Rank 0's side of the render stream: non-blocking sends with a bounded
 /// queue, so rendering never slows the simulation; when the renderer falls
@@ -590,49 +594,43 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
             None
         }
     };
-    let mut pending: BTreeMap<u64, Frame> = BTreeMap::new();
+    let mut queue: VecDeque<Frame> = VecDeque::new();
+    let mut finish: Option<Frame> = None;
     loop {
-        let (bytes, _) = root.receive_vec_with_tag::<u8>(protocol::TAG_FRAME);
-        report.bytes_received += bytes.len() as u64;
-        let msg: RenderMessage = match decode(&bytes) {
-            Ok(m) => m,
-            Err(e) => {
-                eprintln!("rigidsim: renderer: {e}");
-                continue;
+        // Take in everything that has arrived (blocking only when idle).
+        while finish.is_none() && (queue.is_empty() || root.immediate_probe_with_tag(protocol::TAG_FRAME).is_some()) {
+            let (bytes, _) = root.receive_vec_with_tag::<u8>(protocol::TAG_FRAME);
+            report.bytes_received += bytes.len() as u64;
+            match decode::<RenderMessage>(&bytes) {
+                Ok(RenderMessage::Frame(f)) => queue.push_back(f),
+                Ok(RenderMessage::Finish(last)) => finish = Some(last),
+                Err(e) => eprintln!("rigidsim: renderer: {e}"),
             }
-        };
-        match msg {
-            RenderMessage::Frame(f) => {
-                pending.insert(f.index, f);
-                // Catch up: if more frames already wait, draw only the newest.
-                if root.immediate_probe_with_tag(protocol::TAG_FRAME).is_some() {
-                    continue;
-                }
-                let newest = pending.pop_last().map(|(_, f)| f);
-                report.dropped += pending.len() as u64;
-                pending.clear();
-                if let (Some(r), Some(f)) = (renderer.as_mut(), newest) {
-                    let clock = Instant::now();
-                    if let Err(e) = r.render_frame(&f) {
-                        report.notes.push(format!("frame {}: {e}", f.index));
-                    }
-                    report.busy_s += clock.elapsed().as_secs_f64();
-                }
+            while queue.len() > RENDER_QUEUE {
+                queue.pop_front();
+                report.dropped += 1;
             }
-            RenderMessage::Finish(last) => {
-                if let Some(r) = renderer.as_mut() {
-                    for f in std::mem::take(&mut pending).into_values() {
-                        let _ = r.render_frame(&f);
-                    }
-                    if let Err(e) = r.finish(&last) {
-                        report.notes.push(format!("preview: {e}"));
-                    }
-                    report.rendered = r.rendered;
-                    report.notes.extend(r.notes.iter().cloned());
+        }
+        if let Some(f) = queue.pop_front() {
+            if let Some(r) = renderer.as_mut() {
+                let clock = Instant::now();
+                if let Err(e) = r.render_frame(&f) {
+                    report.notes.push(format!("frame {}: {e}", f.index));
                 }
-                root.send_with_tag(&encode(&report)[..], protocol::TAG_RENDER_REPORT);
-                return;
+                report.busy_s += clock.elapsed().as_secs_f64();
             }
+            continue;
+        }
+        if let Some(last) = finish.take() {
+            if let Some(r) = renderer.as_mut() {
+                if let Err(e) = r.finish(&last) {
+                    report.notes.push(format!("preview: {e}"));
+                }
+                report.rendered = r.rendered;
+                report.notes.extend(r.notes.iter().cloned());
+            }
+            root.send_with_tag(&encode(&report)[..], protocol::TAG_RENDER_REPORT);
+            return;
         }
     }
 }

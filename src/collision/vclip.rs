@@ -106,13 +106,16 @@ pub fn closest_features_with_limit(
     max_iterations: u32,
 ) -> Proximity {
     let b_to_a = pose_a.inv_mul(pose_b);
+    let noise = ROUNDING_ULPS * f64::EPSILON * (b_to_a.translation.vector.norm() + a.scale() + b.scale());
     let sa = Side {
         poly: a,
         from_other: b_to_a,
+        noise,
     };
     let sb = Side {
         poly: b,
         from_other: b_to_a.inverse(),
+        noise,
     };
     let mut pair = warm_start
         .and_then(|p| validated(a, b, p))
@@ -188,6 +191,8 @@ pub const TOUCHING_REL_TOL: f64 = 1e-12;
 struct Side<'a> {
     poly: &'a ConvexPolyhedron,
     from_other: Isometry3<f64>,
+    /// Rounding level of lengths in either local frame (see `ROUNDING_ULPS`).
+    noise: f64,
 }
 
 impl Side<'_> {
@@ -195,6 +200,14 @@ impl Side<'_> {
         self.poly.vertices()[v as usize]
     }
 }
+
+/// Distance derivatives and distance differences within this many ulps of
+/// the coordinates' magnitude (the pair's offset plus both sizes) count as
+/// zero. The theory's tie-breaks rely on exact zeros, e.g. an edge exactly
+/// parallel to a face has zero slope where it leaves the face's prism; read
+/// from rounding noise, such a sign sends the walk back and forth between
+/// the face and its edge forever.
+pub const ROUNDING_ULPS: f64 = 16.0;
 
 /// Outcome of one state evaluation. `P`/`Q` replace the first or second
 /// feature of the state function's arguments.
@@ -332,12 +345,12 @@ fn vertex_edge(p: &Side, q: &Side, v: u32, e: u32) -> Step {
     let vx = p.vertex(v);
     let u = h - t;
     if let Some(k) = c.lo_plane {
-        if u.dot(&(t + u * c.lo - vx)) > 0.0 {
+        if u.dot(&(t + u * c.lo - vx)) > p.noise * u.norm() {
             return Step::P(Feature::Edge(planes[k].neighbor));
         }
     }
     if let Some(k) = c.hi_plane {
-        if u.dot(&(t + u * c.hi - vx)) < 0.0 {
+        if u.dot(&(t + u * c.hi - vx)) < -p.noise * u.norm() {
             return Step::P(Feature::Edge(planes[k].neighbor));
         }
     }
@@ -352,21 +365,13 @@ fn vertex_face(p: &Side, q: &Side, v: u32, f: u32) -> Step {
     let side = q.poly.face_voronoi_planes(f as usize);
     if side.iter().any(|plane| plane.signed_distance(&x) < 0.0) {
         // V is outside F's prism, so F's nearest point to V is on F's
-        // boundary: move to the boundary edge nearest V (same distance, lower
-        // dimension). Mirtich takes the most violated plane instead; the
-        // nearest edge costs the same loop and keeps the distance exact.
-        let best = side
-            .iter()
-            .map(|plane| {
-                let edge = q.poly.edges()[plane.neighbor as usize];
-                let (t, h) = (q.vertex(edge.tail), q.vertex(edge.head));
-                let (c, _) = closest_on_segment(&x, &t, &h);
-                ((x - c).norm_squared(), plane.neighbor)
-            })
-            .min_by(|l, r| l.0.total_cmp(&r.0))
-            .map(|(_, e)| e)
-            .unwrap_or(0);
-        return Step::Q(Feature::Edge(best));
+        // boundary: move to the boundary feature holding it (same distance,
+        // lower dimension). Mirtich takes the most violated plane instead;
+        // the nearest feature costs the same loop and keeps the distance.
+        return Step::Q(nearest_boundary_feature(q.poly, side, |t, h| {
+            let (c, lambda) = closest_on_segment(&x, t, h);
+            ((x - c).norm_squared(), lambda)
+        }));
     }
     let face = &q.poly.faces()[f as usize];
     let d = face.normal.dot(&x) - face.offset;
@@ -381,7 +386,7 @@ fn vertex_face(p: &Side, q: &Side, v: u32, f: u32) -> Step {
         let other = if edge.tail == v { edge.head } else { edge.tail };
         let w = xf(&q.from_other, &p.vertex(other));
         let dw = face.normal.dot(&w) - face.offset;
-        if (d > 0.0 && dw < d) || (d < 0.0 && dw > d) {
+        if (d > 0.0 && dw < d - p.noise) || (d < 0.0 && dw > d + p.noise) {
             return Step::P(Feature::Edge(e));
         }
     }
@@ -418,13 +423,13 @@ fn edge_edge(p: &Side, q: &Side, ep: u32, eq: u32) -> Step {
     let edge_q = q.poly.edges()[eq as usize];
     let s0 = xf(&p.from_other, &q.vertex(edge_q.tail));
     let s1 = xf(&p.from_other, &q.vertex(edge_q.head));
-    if let Some(f) = edge_against_edge_region(p.poly, ep, &s0, &s1) {
+    if let Some(f) = edge_against_edge_region(p.poly, ep, &s0, &s1, p.noise) {
         return Step::P(f);
     }
     let edge_p = p.poly.edges()[ep as usize];
     let r0 = xf(&q.from_other, &p.vertex(edge_p.tail));
     let r1 = xf(&q.from_other, &p.vertex(edge_p.head));
-    if let Some(f) = edge_against_edge_region(q.poly, eq, &r0, &r1) {
+    if let Some(f) = edge_against_edge_region(q.poly, eq, &r0, &r1, q.noise) {
         return Step::Q(f);
     }
     Step::Done
@@ -438,19 +443,22 @@ fn edge_against_edge_region(
     e: u32,
     s0: &Vector3<f64>,
     s1: &Vector3<f64>,
+    noise: f64,
 ) -> Option<Feature> {
     let planes = poly.edge_voronoi_planes(e as usize);
     let u = s1 - s0;
     // sign D'(λ) with X = e: u · (s(λ) − nearest point of e). On a vertex
     // plane the nearest point is that vertex; on a face plane it is the
     // projection onto e's line and the difference is along n_F, which gives
-    // the face formula of the module doc.
+    // the face formula of the module doc. Rounding-level values read as 0.
+    let flat = noise * u.norm();
     let slope = |lambda: f64| {
         let s = s0 + u * lambda;
         let t = poly.vertices()[poly.edges()[e as usize].tail as usize];
         let dir = poly.edge_direction(e as usize);
         let along = (s - t).dot(&dir).clamp(0.0, poly.edge_length(e as usize));
-        u.dot(&(s - t - dir * along))
+        let g = u.dot(&(s - t - dir * along));
+        if g.abs() <= flat { 0.0 } else { g }
     };
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     let (mut lo_k, mut hi_k) = (None, None);
@@ -546,20 +554,12 @@ fn edge_face(p: &Side, q: &Side, e: u32, f: u32) -> Step {
     let c = clip(side, &s0, &s1);
     if c.excluded_by.is_some() || c.lo > c.hi {
         // E misses F's prism, so F's nearest point to E is on F's boundary:
-        // move F to the boundary edge nearest E (same distance, lower
+        // move F to the boundary feature holding it (same distance, lower
         // dimension). Mirtich's implementation walks the boundary instead.
-        let best = side
-            .iter()
-            .map(|plane| {
-                let ef = q.poly.edges()[plane.neighbor as usize];
-                let (a, b) =
-                    closest_segment_points(&s0, &s1, &q.vertex(ef.tail), &q.vertex(ef.head));
-                ((a - b).norm_squared(), plane.neighbor)
-            })
-            .min_by(|l, r| l.0.total_cmp(&r.0))
-            .map(|(_, e)| e)
-            .unwrap_or(0);
-        return Step::Q(Feature::Edge(best));
+        return Step::Q(nearest_boundary_feature(q.poly, side, |t, h| {
+            let (a, b, _, lambda) = closest_segment_params(&s0, &s1, t, h);
+            ((a - b).norm_squared(), lambda)
+        }));
     }
     let face = &q.poly.faces()[f as usize];
     let d0 = face.normal.dot(&s0) - face.offset;
@@ -596,6 +596,39 @@ fn edge_face(p: &Side, q: &Side, e: u32, f: u32) -> Step {
     } else {
         edge.head
     })))
+}
+
+/// The edge or vertex on a face's boundary (its side planes `side`) nearest
+/// to a point or segment. `measure(tail, head)` gives the squared distance
+/// to one boundary edge and the parameter of the nearest point on it. A
+/// nearest point at an edge's end makes that vertex the answer: when two
+/// edges tie at their shared vertex, either edge could send the walk back to
+/// the face (the derivative at the vertex plane vanishes for parallel
+/// edges), the vertex cannot.
+fn nearest_boundary_feature(
+    poly: &ConvexPolyhedron,
+    side: &[VoronoiPlane],
+    measure: impl Fn(&Vector3<f64>, &Vector3<f64>) -> (f64, f64),
+) -> Feature {
+    let mut best = (f64::INFINITY, 0u32, 0.5);
+    for plane in side {
+        let edge = poly.edges()[plane.neighbor as usize];
+        let t = &poly.vertices()[edge.tail as usize];
+        let h = &poly.vertices()[edge.head as usize];
+        let (d2, lambda) = measure(t, h);
+        if d2 < best.0 {
+            best = (d2, plane.neighbor, lambda);
+        }
+    }
+    let (_, e, lambda) = best;
+    let edge = poly.edges()[e as usize];
+    if lambda <= 0.0 {
+        Feature::Vertex(edge.tail)
+    } else if lambda >= 1.0 {
+        Feature::Vertex(edge.head)
+    } else {
+        Feature::Edge(e)
+    }
 }
 
 /// Segment `s0 s1` clipped against a region's planes: the part with every
@@ -712,6 +745,18 @@ pub fn closest_segment_points(
     q0: &Vector3<f64>,
     q1: &Vector3<f64>,
 ) -> (Vector3<f64>, Vector3<f64>) {
+    let (p, q, _, _) = closest_segment_params(p0, p1, q0, q1);
+    (p, q)
+}
+
+/// `closest_segment_points` with the parameters s, t ∈ [0, 1] of the two
+/// points along their segments.
+pub fn closest_segment_params(
+    p0: &Vector3<f64>,
+    p1: &Vector3<f64>,
+    q0: &Vector3<f64>,
+    q1: &Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>, f64, f64) {
     let d1 = p1 - p0;
     let d2 = q1 - q0;
     let r = p0 - q0;
@@ -747,7 +792,7 @@ pub fn closest_segment_points(
             }
         }
     }
-    (p0 + d1 * s, q0 + d2 * t)
+    (p0 + d1 * s, q0 + d2 * t, s, t)
 }
 
 /// Which kind of axis a separating-axis test settled on.

@@ -117,6 +117,19 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
     build(file, base_dir, name, path).map_err(|(field, message)| fail(&field, message))
 }
 
+/// Loads a scene from TOML text (tests, tools): `file` names it in errors and
+/// `base_dir` resolves mesh paths.
+pub fn from_str(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
+    let fail = |(field, message): (String, String)| SceneError {
+        file: file.to_path_buf(),
+        field,
+        message,
+    };
+    let parsed = parse(text).map_err(fail)?;
+    let name = file.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+    build(parsed, base_dir, name, file).map_err(fail)
+}
+
 /// Parses TOML text into the schema; errors are (field path, message).
 pub fn parse(text: &str) -> Result<SceneFile, (String, String)> {
     let line_of = |span: Option<std::ops::Range<usize>>| {
