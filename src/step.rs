@@ -92,6 +92,8 @@ impl Executor for Inline {
 /// `sleep_after` seconds stops being integrated, tested and solved.
 pub const SLEEP_LINEAR: f64 = 5e-3;
 pub const SLEEP_ANGULAR: f64 = 5e-2;
+/// Time-of-impact bisection stops once the gap is below this (metres).
+pub const TOI_GAP: f64 = 0.01 * CONTACT_TOLERANCE;
 /// A step that needs more impact events than this accepts the overlap left.
 pub const MAX_EVENTS_PER_STEP: usize = 256;
 
@@ -174,8 +176,10 @@ pub struct World {
     sleep_timer: Vec<f64>,
     /// Resting system a sleeping body belongs to (its lowest body id).
     sleep_group: Vec<u32>,
-    /// Normal force on each touching pair in the last resting solve (for tests).
+    /// Total resting normal force of the last contact solve, and the force
+    /// on each touching body pair (a, b, newtons), for tests and diagnostics.
     pub last_normal_force_sum: f64,
+    pub last_pair_forces: Vec<(BodyId, BodyId, f64)>,
 }
 
 /// A body's motion over the current step: start state at `time` (seconds into
@@ -206,6 +210,7 @@ impl World {
             sleep_timer: vec![0.0; n],
             sleep_group: (0..n as u32).collect(),
             last_normal_force_sum: 0.0,
+            last_pair_forces: Vec::new(),
         }
     }
 
@@ -283,6 +288,14 @@ impl World {
                 }
             })
             .collect();
+
+        // Contacts touching at the very start (bodies placed in contact).
+        if self.steps == 0 && self.touching.is_empty() {
+            let now: Vec<BodyState> = seg.iter().map(|s| s.state).collect();
+            let pairs = self.broadphase(&seg, &now);
+            let results = self.narrowphase_at(exec, &pairs, &now);
+            self.touching = self.touching_from(&pairs, &results);
+        }
 
         // build_islands + solve_islands on the contacts touching now.
         let touching = std::mem::take(&mut self.touching);
@@ -601,8 +614,11 @@ impl World {
     }
 
     /// Bisection for the touching instant (SPEC 2.6, fig. 3.16): `lo` is known
-    /// apart, `hi` overlapping; halve until the gap at `lo` is within half the
-    /// contact tolerance (or the interval is down to rounding).
+    /// apart, `hi` overlapping; halve until the gap at `lo` is within a
+    /// hundredth of the contact tolerance, 0.1 µm (or the interval is down to
+    /// rounding). At 4.4 m/s (a 1 m drop) 0.1 µm is 23 ns: impact times stay
+    /// well within 1e-6 s over many bounces, for about log2(v·dt / 0.1 µm) ≈
+    /// 19 V-Clip queries per impact.
     fn bisect(&mut self, a: usize, b: usize, seg: &[Segment], mut lo: f64, mut hi: f64) -> f64 {
         for _ in 0..64 {
             if hi - lo <= 1e-13 * self.scene.settings.dt {
@@ -610,11 +626,11 @@ impl World {
             }
             let mid = 0.5 * (lo + hi);
             let r = self.query_at(a, b, seg, mid);
-            if r.penetrating && (r.contacts.is_empty() || r.depth > 0.5 * CONTACT_TOLERANCE) {
+            if r.penetrating && r.depth > 0.0 || r.needs_rollback(CONTACT_TOLERANCE) {
                 hi = mid;
             } else {
                 lo = mid;
-                if r.distance <= 0.5 * CONTACT_TOLERANCE {
+                if r.distance <= TOI_GAP {
                     break;
                 }
             }
@@ -671,7 +687,9 @@ impl World {
         let restitution_threshold =
             0.5 * self.scene.settings.gravity.norm() * self.scene.settings.dt;
         let mut tasks = Vec::with_capacity(islands.len());
+        let mut contact_pairs: Vec<Vec<(BodyId, BodyId)>> = Vec::with_capacity(islands.len());
         for (bodies, contact_ids) in &islands {
+            let mut pairs_here = Vec::new();
             let mut index: Vec<BodyId> = bodies.clone();
             let mut contacts = Vec::new();
             for &ci in contact_ids {
@@ -686,6 +704,7 @@ impl World {
                 let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
                 let rules = &self.scene.settings;
                 for p in &t.points {
+                    pairs_here.push((t.a, t.b));
                     contacts.push(IslandContact {
                         a: ia,
                         b: ib,
@@ -695,6 +714,7 @@ impl World {
                             .restitution_rule
                             .combine(oa.restitution, ob.restitution),
                         friction: rules.friction_rule.combine(oa.friction, ob.friction),
+                        separation: p.separation,
                     });
                 }
             }
@@ -737,6 +757,7 @@ impl World {
                 })
                 .collect();
             self.counters.contacts += contacts.len() as u64;
+            contact_pairs.push(pairs_here);
             tasks.push(IslandTask {
                 bodies,
                 contacts,
@@ -754,6 +775,16 @@ impl World {
             .collect();
         let results = exec.solve_islands(tasks);
         self.last_normal_force_sum = 0.0;
+        let mut pair_forces: std::collections::BTreeMap<(BodyId, BodyId), f64> = Default::default();
+        for (pairs, r) in contact_pairs.iter().zip(&results) {
+            for (pair, f) in pairs.iter().zip(&r.contact_force) {
+                *pair_forces.entry(*pair).or_default() += f;
+            }
+        }
+        self.last_pair_forces = pair_forces
+            .into_iter()
+            .map(|((a, b), f)| (a, b, f))
+            .collect();
         for (ids, r) in ids.iter().zip(&results) {
             self.counters.solve.add(&r.stats);
             self.last_normal_force_sum += r.normal_force_sum;

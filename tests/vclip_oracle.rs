@@ -579,6 +579,267 @@ fn identical_and_nested_polyhedra_penetrate() {
     assert!(r.penetrating);
 }
 
+/// Every feature pair of A and B as a warm start converges, without the
+/// fallback, to the cold answer.
+fn assert_every_warm_start_agrees(
+    a: &ConvexPolyhedron,
+    pa: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pb: &Isometry3<f64>,
+) {
+    let features = |p: &ConvexPolyhedron| -> Vec<Feature> {
+        (0..p.vertices().len() as u32)
+            .map(Feature::Vertex)
+            .chain((0..p.edges().len() as u32).map(Feature::Edge))
+            .chain((0..p.face_count() as u32).map(Feature::Face))
+            .collect()
+    };
+    let truth = exhaustive(a, pa, b, pb);
+    let size = a.scale().max(b.scale());
+    for fa in features(a) {
+        for fb in features(b) {
+            let r = closest_features(a, pa, b, pb, Some(FeaturePair { a: fa, b: fb }));
+            assert!(!r.fell_back, "from {fa:?} {fb:?}: {r:?}");
+            if truth.distance.abs() > 1e-9 * size {
+                assert_eq!(
+                    r.penetrating, truth.penetrating,
+                    "from {fa:?} {fb:?}: {r:?}"
+                );
+            }
+            if !r.penetrating {
+                assert!(
+                    (r.distance - truth.distance).abs() <= 1e-12 * size,
+                    "from {fa:?} {fb:?}: {r:?} vs {truth:?}"
+                );
+            }
+        }
+    }
+}
+
+fn euler(r: f64, p: f64, y: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_euler_angles(r, p, y)
+}
+
+use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+
+/// A box edge 7 mm under a triangular prism's horizontal bottom face, and
+/// crossing under one of its edges: the distance derivative where the edge
+/// leaves the face's prism is exactly 0 and its rounded sign used to bounce
+/// the walk between the face and that edge.
+#[test]
+fn edge_parallel_under_a_face_does_not_cycle() {
+    let a = cuboid(1.0, 0.25, 0.5);
+    let b = prism(3, 0.7, 0.2);
+    let pa = pose(v(0.5, -1.0, 1e-6), euler(PI, 0.0, -FRAC_PI_4));
+    let pb = pose(v(0.25, -1.0, FRAC_PI_4.sin()), euler(PI, PI, PI));
+    assert_every_warm_start_agrees(&a, &pa, &b, &pb);
+}
+
+/// An edge passing exactly through another edge's line: both derivatives
+/// vanish and the edge is clipped out of the other's region by rounding.
+#[test]
+fn edge_through_another_edge_does_not_cycle() {
+    let a = prism(4, 0.5, 0.5);
+    let b = cuboid(0.5, 0.5, 0.5);
+    let s = FRAC_PI_4.sin();
+    let pa = pose(v(0.5, s, s + 1e-6), euler(0.0, FRAC_PI_2, -FRAC_PI_4));
+    let pb = pose(v(-0.5, 1.0, 0.25), euler(-FRAC_PI_4, FRAC_PI_4, -FRAC_PI_4));
+    assert_every_warm_start_agrees(&a, &pa, &b, &pb);
+}
+
+/// Overlapping cubes, one turned 45°, where an edge of one lies in a
+/// Voronoi plane of the other: its ends straddle the plane by rounding and
+/// used to be clipped at an arbitrary point.
+#[test]
+fn edge_lying_in_a_voronoi_plane_does_not_cycle() {
+    let a = cuboid(0.5, 0.5, 0.5);
+    let s = FRAC_PI_4.sin();
+    let pa = pose(v(0.0, s, s + 0.1), euler(0.0, FRAC_PI_2, -FRAC_PI_4));
+    let pb = pose(v(0.0, 1.0, 0.5), euler(PI, PI, PI));
+    assert_every_warm_start_agrees(&a, &pa, &a, &pb);
+}
+
+/// A vertex on the rim of a face's prism, under the face, with an edge that
+/// rises out of the prism: the clipped edge has zero length, and the walk
+/// must follow the edge's slope rather than fall back to the vertex.
+#[test]
+fn vertex_on_a_prism_rim_below_the_face_does_not_cycle() {
+    let a = cuboid(0.5, 2.0, 0.5);
+    let b = cuboid(0.5, 0.5, 0.5);
+    let s = FRAC_PI_4.sin();
+    // B turned 45° about y puts a corner at (-s, -0.5, 0) with edges rising
+    // and falling at 45° towards +x; place that corner on A's x = 0.5 face.
+    let turn = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), FRAC_PI_4);
+    for z in [0.2, 0.0, -0.3] {
+        let pb = pose(v(0.5 + s, 0.0, z), turn);
+        assert_every_warm_start_agrees(&a, &at(0.0, 0.0, 0.0), &b, &pb);
+        let r = closest_features(&a, &at(0.0, 0.0, 0.0), &b, &pb, None);
+        assert!(r.distance.abs() < 1e-15, "{r:?}");
+    }
+}
+
+/// Boxes and prisms in right-angle and 45° poses on a coarse grid, with
+/// gaps of 0, 1e-12, 1e-6, 0.1 and -1e-9: the configurations where V-Clip's
+/// exact-zero tie-breaks matter. No fallback, and the same answer as the
+/// exhaustive search (1e-9 absolute; bodies are about 1 m).
+#[test]
+fn right_angle_poses_agree_with_exhaustive_search() {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let shapes = [
+        cuboid(0.5, 0.5, 0.5),
+        cuboid(1.0, 0.25, 0.5),
+        prism(4, 0.5, 0.5),
+        prism(6, 0.5, 0.3),
+        prism(3, 0.7, 0.2),
+        cuboid(3.0, 3.0, 0.5),
+    ];
+    let angles = [0.0, FRAC_PI_4, FRAC_PI_2, PI, -FRAC_PI_4];
+    let grid = [0.0, 0.25, 0.5, 1.0, -0.5, -1.0, FRAC_PI_4.sin(), 1.5];
+    let mut max_iterations = 0;
+    for case in 0..4000 {
+        let a = &shapes[rng.random_range(0..shapes.len())];
+        let b = &shapes[rng.random_range(0..shapes.len())];
+        let gap = [0.0, 1e-12, 1e-6, 0.1, -1e-9][rng.random_range(0..5)];
+        let mut place = |dz: f64| {
+            let t = v(
+                grid[rng.random_range(0..8)],
+                grid[rng.random_range(0..8)],
+                grid[rng.random_range(0..8)] + dz,
+            );
+            let r = euler(
+                angles[rng.random_range(0..5)],
+                angles[rng.random_range(0..5)],
+                angles[rng.random_range(0..5)],
+            );
+            pose(t, r)
+        };
+        let pa = place(gap);
+        let pb = place(0.0);
+        let r = closest_features(a, &pa, b, &pb, None);
+        let x = exhaustive(a, &pa, b, &pb);
+        max_iterations = max_iterations.max(r.iterations);
+        assert!(!r.fell_back, "case {case}");
+        if x.distance.abs() > 1e-9 {
+            assert_eq!(r.penetrating, x.penetrating, "case {case}: {r:?} {x:?}");
+            if !r.penetrating {
+                assert!(
+                    (r.distance - x.distance).abs() < 1e-12,
+                    "case {case}: {r:?} {x:?}"
+                );
+            }
+        } else {
+            assert!(
+                r.penetrating || r.distance < 1e-9,
+                "case {case}: {r:?} {x:?}"
+            );
+        }
+        let contacts = contact_points(a, &pa, b, &pb, &r, TOL);
+        if r.penetrating || r.distance <= TOL {
+            assert!(!contacts.is_empty(), "case {case}");
+        }
+    }
+    println!("max iterations {max_iterations}");
+}
+
+/// Random shapes (geodesic spheres, many-sided prisms, random hulls) put at
+/// an exact gap along an axis or a random direction: touching, 1e-12 and
+/// 1e-7 apart or overlapping, 0.01 apart. Half the queries are warm-started
+/// from the previous (unrelated) pair's features.
+#[test]
+fn exact_contacts_agree_with_exhaustive_search() {
+    let mut rng = ChaCha8Rng::seed_from_u64(77);
+    let mut shapes = vec![
+        cuboid(0.5, 0.5, 0.5),
+        cuboid(2.0, 2.0, 0.1),
+        prism(8, 0.5, 0.5),
+        prism(50, 0.5, 0.2),
+        geodesic(60, 0.5),
+        geodesic(30, 0.3),
+    ];
+    for _ in 0..4 {
+        let pts: Vec<_> = (0..20)
+            .map(|_| {
+                v(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                )
+            })
+            .collect();
+        shapes.push(ConvexPolyhedron::hull(&pts).unwrap());
+    }
+    let mut warm = None;
+    for case in 0..400 {
+        let a = &shapes[rng.random_range(0..shapes.len())];
+        let b = &shapes[rng.random_range(0..shapes.len())];
+        let mut rot = || {
+            if rng.random_bool(0.5) {
+                let q = [0.0, FRAC_PI_2, PI];
+                euler(
+                    q[rng.random_range(0..3)],
+                    q[rng.random_range(0..3)],
+                    q[rng.random_range(0..3)],
+                )
+            } else {
+                random_rotation(&mut rng)
+            }
+        };
+        let (ra, rb) = (rot(), rot());
+        let dir = if rng.random_bool(0.5) {
+            [Vector3::x(), -Vector3::y(), Vector3::z()][rng.random_range(0..3)]
+        } else {
+            random_direction(&mut rng)
+        };
+        let gap = [0.0, 1e-12, -1e-12, 1e-7, -1e-7, 0.01][rng.random_range(0..6)];
+        let pa = pose(v(0.3, -0.2, 0.1), ra);
+        // B's support plane along -dir sits `gap` beyond A's along dir.
+        let ha = (pa * nalgebra::Point3::from(a.support(&(ra.inverse() * dir))))
+            .coords
+            .dot(&dir);
+        let hb = (rb * b.support(&(rb.inverse() * -dir))).dot(&dir);
+        let side = v(
+            rng.random_range(-0.3..0.3),
+            rng.random_range(-0.3..0.3),
+            rng.random_range(-0.3..0.3),
+        );
+        let pb = pose(dir * (ha - hb + gap) + side - dir * side.dot(&dir), rb);
+        let r = closest_features(
+            a,
+            &pa,
+            b,
+            &pb,
+            if rng.random_bool(0.5) { warm } else { None },
+        );
+        warm = Some(r.features);
+        let x = exhaustive(a, &pa, b, &pb);
+        assert!(!r.fell_back, "case {case}");
+        if x.distance.abs() > 1e-9 {
+            assert_eq!(r.penetrating, x.penetrating, "case {case}: {r:?} {x:?}");
+            if !r.penetrating {
+                assert!(
+                    (r.distance - x.distance).abs() < 1e-12,
+                    "case {case}: {r:?} {x:?}"
+                );
+            }
+        } else {
+            assert!(
+                r.penetrating || r.distance < 1e-9,
+                "case {case}: {r:?} {x:?}"
+            );
+        }
+        let contacts = contact_points(a, &pa, b, &pb, &r, TOL);
+        if r.penetrating || r.distance <= TOL {
+            assert!(!contacts.is_empty(), "case {case}");
+            for c in &contacts {
+                assert!(
+                    (c.normal.norm() - 1.0).abs() < 1e-12 && c.separation < TOL + 1e-12,
+                    "case {case}: {c:?}"
+                );
+            }
+        }
+    }
+}
+
 // ---------------------------------------------------------------- construction
 
 #[test]

@@ -598,7 +598,9 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
     let mut finish: Option<Frame> = None;
     loop {
         // Take in everything that has arrived (blocking only when idle).
-        while finish.is_none() && (queue.is_empty() || root.immediate_probe_with_tag(protocol::TAG_FRAME).is_some()) {
+        while finish.is_none()
+            && (queue.is_empty() || root.immediate_probe_with_tag(protocol::TAG_FRAME).is_some())
+        {
             let (bytes, _) = root.receive_vec_with_tag::<u8>(protocol::TAG_FRAME);
             report.bytes_received += bytes.len() as u64;
             match decode::<RenderMessage>(&bytes) {

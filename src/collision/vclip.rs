@@ -106,7 +106,8 @@ pub fn closest_features_with_limit(
     max_iterations: u32,
 ) -> Proximity {
     let b_to_a = pose_a.inv_mul(pose_b);
-    let noise = ROUNDING_ULPS * f64::EPSILON * (b_to_a.translation.vector.norm() + a.scale() + b.scale());
+    let noise =
+        ROUNDING_ULPS * f64::EPSILON * (b_to_a.translation.vector.norm() + a.scale() + b.scale());
     let sa = Side {
         poly: a,
         from_other: b_to_a,
@@ -130,9 +131,6 @@ pub fn closest_features_with_limit(
             };
         }
         iterations += 1;
-        if std::env::var("VCLIP_TRACE").is_ok() {
-            eprintln!("  {iterations}: {pair:?}");
-        }
         match step(&sa, &sb, pair) {
             Step::P(f) => pair.a = f,
             Step::Q(f) => pair.b = f,
@@ -309,13 +307,13 @@ fn edge_neighbor(k: usize, plane: &VoronoiPlane) -> Feature {
 fn vertex_vertex(p: &Side, q: &Side, vp: u32, vq: u32) -> Step {
     let xq = xf(&p.from_other, &q.vertex(vq));
     for plane in p.poly.vertex_voronoi_planes(vp as usize) {
-        if plane.signed_distance(&xq) < 0.0 {
+        if plane.signed_distance(&xq) < -p.noise {
             return Step::P(Feature::Edge(plane.neighbor));
         }
     }
     let xp = xf(&q.from_other, &p.vertex(vp));
     for plane in q.poly.vertex_voronoi_planes(vq as usize) {
-        if plane.signed_distance(&xp) < 0.0 {
+        if plane.signed_distance(&xp) < -q.noise {
             return Step::Q(Feature::Edge(plane.neighbor));
         }
     }
@@ -329,7 +327,7 @@ fn vertex_edge(p: &Side, q: &Side, v: u32, e: u32) -> Step {
     // Beyond a face plane only, moving into the face strictly lowers it.
     let x = xf(&q.from_other, &p.vertex(v));
     for (k, plane) in q.poly.edge_voronoi_planes(e as usize).iter().enumerate() {
-        if plane.signed_distance(&x) < 0.0 {
+        if plane.signed_distance(&x) < -q.noise {
             return Step::Q(edge_neighbor(k, plane));
         }
     }
@@ -338,7 +336,7 @@ fn vertex_edge(p: &Side, q: &Side, v: u32, e: u32) -> Step {
     let t = xf(&p.from_other, &q.vertex(edge.tail));
     let h = xf(&p.from_other, &q.vertex(edge.head));
     let planes = p.poly.vertex_voronoi_planes(v as usize);
-    let c = clip(planes, &t, &h);
+    let c = clip(planes, &t, &h, p.noise);
     if let Some(k) = c.excluded_by {
         return Step::P(Feature::Edge(planes[k].neighbor));
     }
@@ -363,7 +361,10 @@ fn vertex_edge(p: &Side, q: &Side, v: u32, e: u32) -> Step {
 fn vertex_face(p: &Side, q: &Side, v: u32, f: u32) -> Step {
     let x = xf(&q.from_other, &p.vertex(v));
     let side = q.poly.face_voronoi_planes(f as usize);
-    if side.iter().any(|plane| plane.signed_distance(&x) < 0.0) {
+    if side
+        .iter()
+        .any(|plane| plane.signed_distance(&x) < -q.noise)
+    {
         // V is outside F's prism, so F's nearest point to V is on F's
         // boundary: move to the boundary feature holding it (same distance,
         // lower dimension). Mirtich takes the most violated plane instead;
@@ -374,7 +375,7 @@ fn vertex_face(p: &Side, q: &Side, v: u32, f: u32) -> Step {
         }));
     }
     let face = &q.poly.faces()[f as usize];
-    let d = face.normal.dot(&x) - face.offset;
+    let d = snap(face.normal.dot(&x) - face.offset, q.noise);
     if d == 0.0 {
         return Step::Done;
     }
@@ -404,7 +405,7 @@ fn vertex_face(p: &Side, q: &Side, v: u32, f: u32) -> Step {
         .map(|(g, fg)| (g, fg.normal.dot(&x) - fg.offset))
         .max_by(|l, r| l.1.total_cmp(&r.1))
         .unwrap_or((f as usize, d));
-    if dmax > 0.0 {
+    if dmax > q.noise {
         return Step::Q(Feature::Face(g as u32));
     }
     let fg = &q.poly.faces()[g];
@@ -413,8 +414,8 @@ fn vertex_face(p: &Side, q: &Side, v: u32, f: u32) -> Step {
         q: Feature::Face(g as u32),
         on_p: p.vertex(v),
         on_q: x - fg.normal * dmax,
-        depth: dmax,
-        penetrating: dmax < 0.0,
+        depth: if dmax < -q.noise { dmax } else { 0.0 },
+        penetrating: dmax < -q.noise,
     })
 }
 
@@ -463,7 +464,10 @@ fn edge_against_edge_region(
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     let (mut lo_k, mut hi_k) = (None, None);
     for (k, plane) in planes.iter().enumerate().take(2) {
-        let (d0, d1) = (plane.signed_distance(s0), plane.signed_distance(s1));
+        let (d0, d1) = (
+            snap(plane.signed_distance(s0), noise),
+            snap(plane.signed_distance(s1), noise),
+        );
         if d0 < 0.0 && d1 < 0.0 {
             return Some(edge_neighbor(k, plane));
         }
@@ -485,7 +489,10 @@ fn edge_against_edge_region(
         if compound {
             break;
         }
-        let (d0, d1) = (plane.signed_distance(s0), plane.signed_distance(s1));
+        let (d0, d1) = (
+            snap(plane.signed_distance(s0), noise),
+            snap(plane.signed_distance(s1), noise),
+        );
         if d0 < 0.0 && d1 < 0.0 {
             // The segment is wholly on the face's side, yet its nearest point
             // may be an end vertex of e (where the face's angle can be acute,
@@ -520,6 +527,10 @@ fn edge_against_edge_region(
         // before leaving N_lo's. Convexity of D puts its minimum on the side
         // the derivative points to; vertex neighbours are tested first.
         let (lk, hk) = (lo_k?, hi_k?);
+        // Flat at both crossings: the segment runs through e's line.
+        if slope(lo) == 0.0 && slope(hi) == 0.0 {
+            return None;
+        }
         let pick = |k: usize| Some(edge_neighbor(k, &planes[k]));
         return if lk < 2 {
             pick(if slope(lo) >= 0.0 { lk } else { hk })
@@ -551,7 +562,7 @@ fn edge_face(p: &Side, q: &Side, e: u32, f: u32) -> Step {
     let s0 = xf(&q.from_other, &tp);
     let s1 = xf(&q.from_other, &hp);
     let side = q.poly.face_voronoi_planes(f as usize);
-    let c = clip(side, &s0, &s1);
+    let c = clip(side, &s0, &s1, q.noise);
     if c.excluded_by.is_some() || c.lo > c.hi {
         // E misses F's prism, so F's nearest point to E is on F's boundary:
         // move F to the boundary feature holding it (same distance, lower
@@ -564,8 +575,10 @@ fn edge_face(p: &Side, q: &Side, e: u32, f: u32) -> Step {
     let face = &q.poly.faces()[f as usize];
     let d0 = face.normal.dot(&s0) - face.offset;
     let d1 = face.normal.dot(&s1) - face.offset;
-    let dlo = d0 + c.lo * (d1 - d0);
-    let dhi = d0 + c.hi * (d1 - d0);
+    // Rounding-level heights count as on the plane: an edge through F's rim
+    // otherwise alternates between F and the rim edge.
+    let dlo = snap(d0 + c.lo * (d1 - d0), p.noise);
+    let dhi = snap(d0 + c.hi * (d1 - d0), p.noise);
     if (dlo <= 0.0 && dhi >= 0.0) || (dlo >= 0.0 && dhi <= 0.0) {
         // The clipped edge reaches F's plane inside F's prism: E meets F.
         let touching = dlo >= 0.0 && dhi >= 0.0;
@@ -585,7 +598,15 @@ fn edge_face(p: &Side, q: &Side, e: u32, f: u32) -> Step {
             penetrating: !touching,
         });
     }
-    let towards_lo = if dlo > 0.0 { dlo <= dhi } else { dlo >= dhi };
+    // |d| shrinks towards the lower end when d grows along the edge above
+    // the plane, or falls along it below. Decided from the whole edge, not
+    // the clipped ends, which coincide when the edge only grazes the prism.
+    let rising = snap(d1 - d0, p.noise);
+    let towards_lo = if dlo > 0.0 {
+        rising >= 0.0
+    } else {
+        rising <= 0.0
+    };
     let next = if towards_lo {
         c.lo_plane.map(|k| Step::Q(Feature::Edge(side[k].neighbor)))
     } else {
@@ -631,6 +652,15 @@ fn nearest_boundary_feature(
     }
 }
 
+/// A signed distance within rounding of zero is zero: regions are closed,
+/// and a point on a shared boundary belongs to both neighbours, as in exact
+/// arithmetic. Otherwise an edge lying in a Voronoi plane (a box edge over a
+/// box face) gets clipped at a λ chosen by rounding noise.
+#[inline]
+fn snap(d: f64, noise: f64) -> f64 {
+    if d.abs() <= noise { 0.0 } else { d }
+}
+
 /// Segment `s0 s1` clipped against a region's planes: the part with every
 /// signed distance ≥ 0 is `[lo, hi]`; `lo > hi` means it misses (compound
 /// exclusion); `excluded_by` names a plane that both ends lie behind (simple
@@ -643,7 +673,7 @@ struct Clip {
     excluded_by: Option<usize>,
 }
 
-fn clip(planes: &[VoronoiPlane], s0: &Vector3<f64>, s1: &Vector3<f64>) -> Clip {
+fn clip(planes: &[VoronoiPlane], s0: &Vector3<f64>, s1: &Vector3<f64>, noise: f64) -> Clip {
     let mut c = Clip {
         lo: 0.0,
         hi: 1.0,
@@ -652,7 +682,10 @@ fn clip(planes: &[VoronoiPlane], s0: &Vector3<f64>, s1: &Vector3<f64>) -> Clip {
         excluded_by: None,
     };
     for (k, plane) in planes.iter().enumerate() {
-        let (d0, d1) = (plane.signed_distance(s0), plane.signed_distance(s1));
+        let (d0, d1) = (
+            snap(plane.signed_distance(s0), noise),
+            snap(plane.signed_distance(s1), noise),
+        );
         if d0 < 0.0 && d1 < 0.0 {
             c.excluded_by = Some(k);
             return c;

@@ -126,9 +126,12 @@
 //! ```
 //!
 //! and the largest must not exceed [`LcpOptions::tolerance`] (1e-9 by default).
-//! If it does, x_C is recomputed once from a fresh factor of the final clamped
-//! set and checked again; failing that, the solve returns
-//! [`LcpError::Numerical`]. NaN never leaves this module.
+//! Before the check, x is projected onto its bounds (it can sit 1e-17 outside
+//! after many steps). If the check fails, x_C is recomputed once from a fresh
+//! factor of the final clamped set (for friction problems, the exact step
+//! below) and checked again; failing that, the solve returns
+//! [`LcpError::Numerical`]. NaN never leaves this module: input is checked for
+//! non-finite values and every direction and step is checked before use.
 //!
 //! # Friction rows
 //!

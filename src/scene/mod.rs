@@ -126,7 +126,11 @@ pub fn from_str(text: &str, file: &Path, base_dir: &Path) -> Result<Scene, Scene
         message,
     };
     let parsed = parse(text).map_err(fail)?;
-    let name = file.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+    let name = file
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("scene")
+        .to_string();
     build(parsed, base_dir, name, file).map_err(fail)
 }
 

@@ -1,0 +1,854 @@
+//! The binary under `mpirun` (SPEC 3, issues 5 and 6): results that do not
+//! depend on the rank count, the roles, the render rank's frames, the slowed
+//! rank's share, small scenes kept on rank 0, and a rank killed mid-run.
+//!
+//! Every test runs `mpirun --oversubscribe -np N rigidsim SCENE --out TMP
+//! --no-progress …` on a short run (at most 1 s simulated) and reads
+//! `TMP/summary.json`. CI has 2 cores, so -np 3 and 5 are oversubscribed and
+//! wall times here are no performance numbers. Runs are serialised (one
+//! `mpirun` at a time, see `one_at_a_time`): busy-polling ranks of two jobs on
+//! 2 cores would slow each other and blur the slowed rank's measured speed.
+//!
+//! A missing `mpirun` fails every test (run `scripts/setup.sh`): a cluster
+//! test that skips itself would pass on exactly the machines where the
+//! cluster was never tried.
+//!
+//! `cargo test --release --test cluster_mpi -- --nocapture` prints each run's
+//! command line and wall time.
+
+use serde_json::Value;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_rigidsim");
+/// A run that takes longer than this is hung, not slow: the longest run here
+/// takes a few seconds even oversubscribed on 2 cores.
+const RUN_LIMIT: Duration = Duration::from_secs(120);
+/// The trajectory header (`src/output/trajectory.rs`); 15 fields a row.
+const TRAJECTORY_HEADER: &str = "time,body,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz";
+
+fn scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(name)
+}
+
+/// One `mpirun` at a time across this file's tests (a failed test poisons
+/// the lock; the next one still runs).
+fn one_at_a_time() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// `mpirun` on PATH, or a failure that says how to get it.
+fn mpirun() -> PathBuf {
+    let found = std::env::var_os("PATH").and_then(|paths| {
+        std::env::split_paths(&paths)
+            .map(|d| d.join("mpirun"))
+            .find(|p| p.is_file())
+    });
+    found.unwrap_or_else(|| {
+        panic!(
+            "mpirun is not on PATH: the cluster tests need Open MPI. Run scripts/setup.sh \
+             (it installs openmpi-bin, libopenmpi-dev, mesa-vulkan-drivers and ffmpeg), \
+             then run the tests again"
+        )
+    })
+}
+
+/// How to start a run: alone (no mpirun: one rank, inline) or under mpirun.
+#[derive(Clone, Copy, Debug)]
+enum Ranks {
+    Alone,
+    Np(u32),
+}
+
+/// Builds the command for `ranks` ranks of rigidsim on `scene` into `out`.
+fn command(ranks: Ranks, scene: &Path, out: &Path, args: &[&str]) -> Command {
+    let mut cmd = match ranks {
+        Ranks::Alone => Command::new(BIN),
+        Ranks::Np(np) => {
+            let mut c = Command::new(mpirun());
+            // --oversubscribe: CI has 2 cores and Open MPI counts one slot a core.
+            c.args(["--oversubscribe", "-np", &np.to_string(), BIN]);
+            c
+        }
+    };
+    cmd.arg(scene)
+        .arg("--out")
+        .arg(out)
+        .arg("--no-progress")
+        .args(args)
+        // Open MPI refuses root without these (CI containers run as root);
+        // Mesa's device-select layer is noise without a desktop session.
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("NODEVICE_SELECT", "1")
+        .stdin(Stdio::null());
+    cmd
+}
+
+fn describe(ranks: Ranks, scene: &Path, args: &[&str]) -> String {
+    let name = scene.file_name().unwrap().to_string_lossy();
+    match ranks {
+        Ranks::Alone => format!("rigidsim {name} {}", args.join(" ")),
+        Ranks::Np(np) => format!("mpirun -np {np} rigidsim {name} {}", args.join(" ")),
+    }
+}
+
+/// Starts a command with stdout and stderr going to files next to `out`.
+fn spawn(mut cmd: Command, out: &Path) -> Child {
+    let log = |ext: &str| {
+        std::fs::File::create(out.with_extension(ext))
+            .unwrap_or_else(|e| panic!("cannot create the log next to {}: {e}", out.display()))
+    };
+    cmd.stdout(log("stdout")).stderr(log("stderr"));
+    cmd.spawn()
+        .unwrap_or_else(|e| panic!("cannot start {:?}: {e}", cmd.get_program()))
+}
+
+/// Waits up to `limit`; `None` if the child is still running then.
+fn wait_for(child: &mut Child, limit: Duration) -> Option<ExitStatus> {
+    let until = Instant::now() + limit;
+    loop {
+        if let Some(status) = child.try_wait().expect("waiting on mpirun") {
+            return Some(status);
+        }
+        if Instant::now() >= until {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn stderr_of(out: &Path) -> String {
+    std::fs::read_to_string(out.with_extension("stderr")).unwrap_or_default()
+}
+
+/// A finished run: its output folder and summary.
+struct Run {
+    what: String,
+    out: PathBuf,
+    summary: Value,
+}
+
+impl Run {
+    fn state_hash(&self) -> &str {
+        self.summary["state_hash"]
+            .as_str()
+            .unwrap_or_else(|| panic!("{}: summary.json has no state_hash", self.what))
+    }
+
+    fn per_rank(&self) -> &[Value] {
+        self.summary["per_rank"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{}: summary.json has no per_rank", self.what))
+    }
+
+    fn roles(&self) -> Vec<(u64, String)> {
+        self.per_rank()
+            .iter()
+            .map(|r| {
+                (
+                    r["rank"].as_u64().unwrap(),
+                    r["role"].as_str().unwrap().to_string(),
+                )
+            })
+            .collect()
+    }
+
+    fn rank(&self, rank: u64) -> &Value {
+        self.per_rank()
+            .iter()
+            .find(|r| r["rank"].as_u64() == Some(rank))
+            .unwrap_or_else(|| panic!("{}: no rank {rank} in per_rank", self.what))
+    }
+
+    fn count(&self, path: &[&str]) -> u64 {
+        let mut v = &self.summary;
+        for key in path {
+            v = &v[key];
+        }
+        v.as_u64()
+            .unwrap_or_else(|| panic!("{}: summary.json has no {}", self.what, path.join(".")))
+    }
+
+    fn trajectory(&self) -> Vec<u8> {
+        let path = self.out.join("trajectory.csv");
+        std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {}: {e}", self.what, path.display()))
+    }
+}
+
+/// Runs to the end, expecting success, and reads `summary.json`.
+fn run(root: &Path, label: &str, ranks: Ranks, scene: &Path, args: &[&str]) -> Run {
+    let what = describe(ranks, scene, args);
+    let out = root.join(label);
+    let started = Instant::now();
+    let mut child = spawn(command(ranks, scene, &out, args), &out);
+    let Some(status) = wait_for(&mut child, RUN_LIMIT) else {
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!(
+            "{what}: still running after {RUN_LIMIT:?} (hung?); stderr:\n{}",
+            stderr_of(&out)
+        );
+    };
+    let wall = started.elapsed();
+    eprintln!("[cluster_mpi] {what}: {:.2} s wall", wall.as_secs_f64());
+    assert!(
+        status.success(),
+        "{what}: failed with {status}; stderr:\n{}",
+        stderr_of(&out)
+    );
+    let path = out.join("summary.json");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{what}: {}: {e}; stderr:\n{}",
+            path.display(),
+            stderr_of(&out)
+        )
+    });
+    let summary = serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("{what}: summary.json is not JSON: {e}"));
+    Run { what, out, summary }
+}
+
+fn temp_root() -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix("rigidsim-cluster-")
+        .tempdir()
+        .expect("a temporary folder")
+}
+
+/// Asserts two runs ended in the same state with byte-identical trajectories;
+/// on a difference, names the first differing trajectory line.
+fn assert_same_result(reference: &Run, other: &Run) {
+    assert_eq!(
+        reference.state_hash(),
+        other.state_hash(),
+        "state_hash differs: {} vs {}",
+        reference.what,
+        other.what
+    );
+    let (a, b) = (reference.trajectory(), other.trajectory());
+    if a != b {
+        let (a, b) = (String::from_utf8_lossy(&a), String::from_utf8_lossy(&b));
+        let first = a
+            .lines()
+            .zip(b.lines())
+            .position(|(x, y)| x != y)
+            .unwrap_or(a.lines().count().min(b.lines().count()));
+        panic!(
+            "trajectory.csv differs between {} and {} from line {}:\n  {}\n  {}",
+            reference.what,
+            other.what,
+            first + 1,
+            a.lines().nth(first).unwrap_or("<end of file>"),
+            b.lines().nth(first).unwrap_or("<end of file>"),
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------
+// 1. Determinism across rank counts (issue 5, STYLE 6).
+// ---------------------------------------------------------------------------
+
+/// Five boxes on a floor, each its own island, kept awake: with
+/// `--force-distribute` every step scatters several friction LCPs, which the
+/// nuts-and-bolts scene does not do in its first second (its bodies are still
+/// bouncing one by one, so no step has two islands).
+const FIVE_ISLANDS: &str = r#"
+[world]
+dt = 0.01
+duration = 1.0
+
+[objects.floor]
+shape = { box = { half_extents = [1.0, 1.0, 0.1] } }
+mass = 1.0
+restitution = 0.3
+friction = 0.5
+
+[objects.box]
+shape = { box = { half_extents = [0.05, 0.05, 0.05] } }
+mass = 1.0
+restitution = 0.3
+friction = 0.5
+
+[[bodies]]
+object = "floor"
+position = [0.0, 0.0, -0.1]   # top face at z = 0
+fixed = true
+
+# Dropped from 2 to 6 cm, some sliding or spinning, 30 cm apart (never touching).
+[[bodies]]
+object = "box"
+position = [-0.6, 0.0, 0.07]
+velocity = [0.3, 0.0, 0.0]
+[[bodies]]
+object = "box"
+position = [-0.3, 0.0, 0.08]
+velocity = [0.0, 0.3, 0.0]
+[[bodies]]
+object = "box"
+position = [0.0, 0.0, 0.09]
+[[bodies]]
+object = "box"
+position = [0.3, 0.0, 0.10]
+velocity = [-0.2, 0.1, 0.0]
+[[bodies]]
+object = "box"
+position = [0.6, 0.0, 0.11]
+angular_velocity = [0.0, 0.0, 2.0]
+"#;
+
+fn five_islands(root: &Path) -> PathBuf {
+    let path = root.join("five_islands.toml");
+    std::fs::write(&path, FIVE_ISLANDS).expect("writing the five-islands scene");
+    path
+}
+
+#[test]
+fn state_hash_and_trajectory_are_identical_on_1_2_3_and_5_ranks() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let nuts = scene("nuts_and_bolts.toml");
+    let args = ["--duration", "1.0", "--force-distribute", "--no-render"];
+    let reference = run(root.path(), "np1", Ranks::Np(1), &nuts, &args);
+    let alone = run(root.path(), "alone", Ranks::Alone, &nuts, &args);
+    assert_same_result(&reference, &alone);
+    for np in [2, 3, 5] {
+        let other = run(root.path(), &format!("np{np}"), Ranks::Np(np), &nuts, &args);
+        // Otherwise the comparison proves nothing about merging.
+        assert!(
+            other.count(&["distributed", "narrowphase_distributed"]) > 0,
+            "{}: no narrowphase was distributed",
+            other.what
+        );
+        assert!(
+            other.per_rank()[1..]
+                .iter()
+                .all(|r| r["narrowphase_tasks"].as_u64().unwrap() > 0),
+            "{}: a worker got no pairs: {:?}",
+            other.what,
+            other.per_rank()
+        );
+        assert_same_result(&reference, &other);
+    }
+}
+
+#[test]
+fn distributed_island_solves_match_one_rank() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = five_islands(root.path());
+    let args = ["--force-distribute", "--no-render", "--no-sleep"];
+    let reference = run(root.path(), "np1", Ranks::Np(1), &scene, &args);
+    for np in [2, 3] {
+        let other = run(
+            root.path(),
+            &format!("np{np}"),
+            Ranks::Np(np),
+            &scene,
+            &args,
+        );
+        assert!(
+            other.count(&["distributed", "solve_distributed"]) > 0,
+            "{}: no solve_islands stage was distributed",
+            other.what
+        );
+        assert_same_result(&reference, &other);
+    }
+}
+
+#[test]
+fn render_rank_leaves_state_hash_and_trajectory_unchanged() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let nuts = scene("nuts_and_bolts.toml");
+    let args = ["--duration", "1.0", "--force-distribute"];
+    let without = run(
+        root.path(),
+        "np3-no-render",
+        Ranks::Np(3),
+        &nuts,
+        &[&args[..], &["--no-render"]].concat(),
+    );
+    let with = run(root.path(), "np3-render", Ranks::Np(3), &nuts, &args);
+    assert_eq!(
+        with.roles(),
+        [
+            (0, "coordinator".into()),
+            (1, "worker".into()),
+            (2, "renderer".into())
+        ]
+    );
+    assert!(
+        with.count(&["frames_rendered"]) > 0,
+        "rank 2 rendered nothing"
+    );
+    assert_same_result(&without, &with);
+}
+
+// ---------------------------------------------------------------------------
+// 2. Roles (SPEC 3.1).
+// ---------------------------------------------------------------------------
+
+#[test]
+fn three_ranks_with_rendering_are_coordinator_worker_renderer() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let r = run(
+        root.path(),
+        "np3",
+        Ranks::Np(3),
+        &scene("render_check.toml"),
+        &[],
+    );
+    assert_eq!(
+        r.roles(),
+        [
+            (0, "coordinator".into()),
+            (1, "worker".into()),
+            (2, "renderer".into())
+        ]
+    );
+    let renderer = r.rank(2);
+    assert_eq!(
+        renderer["tasks"].as_u64(),
+        Some(0),
+        "the renderer was given tasks"
+    );
+}
+
+#[test]
+fn no_render_makes_every_other_rank_a_worker() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let r = run(
+        root.path(),
+        "np3",
+        Ranks::Np(3),
+        &scene("render_check.toml"),
+        &["--no-render"],
+    );
+    assert_eq!(
+        r.roles(),
+        [
+            (0, "coordinator".into()),
+            (1, "worker".into()),
+            (2, "worker".into())
+        ]
+    );
+    assert_eq!(r.count(&["frames_rendered"]), 0);
+    assert!(!r.out.join("frames").exists(), "--no-render wrote frames");
+    assert!(
+        !r.out.join("preview.png").exists(),
+        "--no-render wrote preview.png"
+    );
+}
+
+#[test]
+fn forced_distribution_sends_pairs_and_islands_to_the_worker() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = five_islands(root.path());
+    let r = run(
+        root.path(),
+        "np2",
+        Ranks::Np(2),
+        &scene,
+        &["--force-distribute", "--no-render", "--no-sleep"],
+    );
+    let worker = r.rank(1);
+    assert_eq!(worker["role"], "worker");
+    for field in ["narrowphase_tasks", "island_tasks"] {
+        assert!(
+            worker[field].as_u64().unwrap() > 0,
+            "the worker's {field} is 0: {worker}"
+        );
+    }
+    assert!(
+        worker["estimated_cost_s"].as_f64().unwrap() > 0.0,
+        "{worker}"
+    );
+    assert!(worker["busy_s"].as_f64().unwrap() > 0.0, "{worker}");
+}
+
+/// Each rank counts the tasks it did itself, so the counts add up to the
+/// run's totals (`counters.pair_tests` pairs, `counters.islands` islands).
+#[test]
+fn per_rank_task_counts_add_up_to_the_run_totals() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = five_islands(root.path());
+    let r = run(
+        root.path(),
+        "np3",
+        Ranks::Np(3),
+        &scene,
+        &["--force-distribute", "--no-render", "--no-sleep"],
+    );
+    let sum = |field: &str| -> u64 {
+        r.per_rank()
+            .iter()
+            .map(|x| x[field].as_u64().unwrap())
+            .sum()
+    };
+    let summary = |key: &str| r.count(&["counters", key]);
+    let ranks: Vec<String> = r
+        .per_rank()
+        .iter()
+        .map(|x| {
+            format!(
+                "rank {}: {} pairs, {} islands",
+                x["rank"], x["narrowphase_tasks"], x["island_tasks"]
+            )
+        })
+        .collect();
+    assert_eq!(
+        sum("narrowphase_tasks"),
+        summary("pair_tests"),
+        "pairs per rank do not add up to counters.pair_tests ({ranks:?})"
+    );
+    assert_eq!(
+        sum("island_tasks"),
+        summary("islands"),
+        "islands per rank do not add up to counters.islands ({ranks:?})"
+    );
+}
+
+// ---------------------------------------------------------------------------
+// 3. Frames from the render rank (issue 6).
+// ---------------------------------------------------------------------------
+
+/// `scenes/render_check.toml`: dt 0.01 s, 0.5 s, `every` 0.05 s: a frame at
+/// t = 0 and after every 5th of the 50 steps → 11 frames, 160 × 120.
+const RENDER_CHECK_STEPS: u64 = 50;
+const RENDER_CHECK_FRAMES: u64 = 11;
+const RENDER_CHECK_SIZE: (u32, u32) = (160, 120);
+
+/// Width and height from a PNG's IHDR, or `None` if it is not a PNG.
+fn png_size(path: &Path) -> Option<(u32, u32)> {
+    let mut head = [0u8; 24];
+    std::fs::File::open(path).ok()?.read_exact(&mut head).ok()?;
+    if head[..8] != *b"\x89PNG\r\n\x1a\n" || head[12..16] != *b"IHDR" {
+        return None;
+    }
+    let be = |b: &[u8]| u32::from_be_bytes(b.try_into().unwrap());
+    Some((be(&head[16..20]), be(&head[20..24])))
+}
+
+fn check_render_rank(np: u32) {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = scene("render_check.toml");
+    let reference = run(
+        root.path(),
+        "no-render",
+        Ranks::Np(1),
+        &scene,
+        &["--no-render"],
+    );
+    let r = run(root.path(), &format!("np{np}"), Ranks::Np(np), &scene, &[]);
+    assert_eq!(
+        r.count(&["steps"]),
+        RENDER_CHECK_STEPS,
+        "the scene changed?"
+    );
+    let renderer = np as u64 - 1;
+    assert_eq!(r.rank(renderer)["role"], "renderer");
+
+    let rendered = r.count(&["frames_rendered"]);
+    let dropped = r.count(&["frames_dropped"]);
+    assert_eq!(
+        rendered + dropped,
+        RENDER_CHECK_FRAMES,
+        "frames rendered ({rendered}) + dropped ({dropped})"
+    );
+    // 11 frames of 160 × 120 never fill the 64-frame queues.
+    assert_eq!(dropped, 0, "frames dropped in a tiny scene");
+    assert_eq!(r.rank(renderer)["frames_rendered"].as_u64(), Some(rendered));
+
+    let frames = r.out.join("frames");
+    for i in 0..RENDER_CHECK_FRAMES {
+        let path = frames.join(format!("frame_{i:05}.png"));
+        assert_eq!(
+            png_size(&path),
+            Some(RENDER_CHECK_SIZE),
+            "{} is missing or not a {}×{} PNG",
+            path.display(),
+            RENDER_CHECK_SIZE.0,
+            RENDER_CHECK_SIZE.1
+        );
+    }
+    let files = std::fs::read_dir(&frames).unwrap().count() as u64;
+    assert_eq!(files, RENDER_CHECK_FRAMES, "files in {}", frames.display());
+    assert_eq!(
+        png_size(&r.out.join("preview.png")),
+        Some(RENDER_CHECK_SIZE),
+        "preview.png missing or wrong size"
+    );
+    assert_eq!(
+        reference.state_hash(),
+        r.state_hash(),
+        "rendering changed the simulation"
+    );
+}
+
+#[test]
+fn render_rank_draws_every_frame_with_two_ranks() {
+    check_render_rank(2);
+}
+
+#[test]
+fn render_rank_draws_every_frame_with_three_ranks() {
+    check_render_rank(3);
+}
+
+// ---------------------------------------------------------------------------
+// 4. A slowed rank gets less work (SPEC 3.2–3.3).
+// ---------------------------------------------------------------------------
+
+/// `--slow-rank 2=3.0` makes rank 2 three times slower. With speeds 1 : 1/3
+/// the greedy rule gives rank 2 about a third of rank 1's estimated cost.
+/// The band is wide because (a) speeds start equal and are smoothed (weight
+/// 0.3), so the first distributed frames split evenly; (b) a frame has only a
+/// dozen pairs, so a share moves in whole tasks; (c) busy times are measured
+/// on 2 oversubscribed cores. Its ends still mean something: below 0.2 (speed
+/// estimates off by more than 40 %) the slowed rank is starved; above 0.6 the
+/// scheduler barely reacts (two equal workers give about 1).
+const SLOW_SHARE_BAND: (f64, f64) = (0.2, 0.6);
+
+#[test]
+fn slowed_rank_gets_work_in_proportion_to_its_speed() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let nuts = scene("nuts_and_bolts.toml");
+    let args = ["--duration", "1.0", "--force-distribute", "--no-render"];
+    let reference = run(root.path(), "np1", Ranks::Np(1), &nuts, &args);
+    let slowed = run(
+        root.path(),
+        "np3-slow",
+        Ranks::Np(3),
+        &nuts,
+        &[&args[..], &["--slow-rank", "2=3.0"]].concat(),
+    );
+    let cost = |rank| slowed.rank(rank)["estimated_cost_s"].as_f64().unwrap();
+    let ratio = cost(2) / cost(1);
+    eprintln!(
+        "[cluster_mpi] slowed rank 2 / rank 1 estimated cost = {ratio:.3} (expected about 0.33); \
+         speeds {} and {}",
+        slowed.rank(1)["speed"],
+        slowed.rank(2)["speed"]
+    );
+    assert!(
+        (SLOW_SHARE_BAND.0..=SLOW_SHARE_BAND.1).contains(&ratio),
+        "rank 2 (3× slower) got {ratio:.3} of rank 1's estimated cost; expected about 1/3, \
+         within {SLOW_SHARE_BAND:?}. per_rank: {:?}",
+        slowed.per_rank()
+    );
+    assert_eq!(
+        reference.state_hash(),
+        slowed.state_hash(),
+        "a slowed rank changed the simulation"
+    );
+}
+
+// ---------------------------------------------------------------------------
+// 5. Small scenes stay on rank 0 (issue 5: messages must pay for themselves).
+// ---------------------------------------------------------------------------
+
+#[test]
+fn small_scene_stays_on_rank_0() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let r = run(
+        root.path(),
+        "np2",
+        Ranks::Np(2),
+        &scene("bouncing_cube.toml"),
+        &["--duration", "1.0", "--no-render"],
+    );
+    assert_eq!(r.count(&["distributed", "narrowphase_distributed"]), 0);
+    assert_eq!(r.count(&["distributed", "solve_distributed"]), 0);
+    assert_eq!(
+        r.rank(1)["tasks"].as_u64(),
+        Some(0),
+        "the worker was given tasks"
+    );
+}
+
+// ---------------------------------------------------------------------------
+// 6. A rank killed mid-run (issue 5: no silent hang; outputs stay readable).
+// ---------------------------------------------------------------------------
+
+/// After a worker dies the whole job must be gone within this (Open MPI
+/// notices a dead child at once; seconds are for an oversubscribed machine).
+const END_AFTER_KILL: Duration = Duration::from_secs(15);
+
+fn read_proc(pid: u32, file: &str) -> Option<Vec<u8>> {
+    std::fs::read(format!("/proc/{pid}/{file}")).ok()
+}
+
+/// Pids of this job's rigidsim ranks with their MPI rank, found by the job's
+/// unique output folder on the command line (so never another job's process)
+/// and the rank Open MPI puts in each rank's environment. Works whether the
+/// ranks are mpirun's children (Open MPI 4) or a daemon's (Open MPI 5).
+fn ranks_of_job(marker: &Path) -> Vec<(u32, u32)> {
+    let marker = marker.as_os_str().as_encoded_bytes();
+    let mut found = Vec::new();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return found;
+    };
+    for entry in entries.flatten() {
+        let Some(pid) = entry
+            .file_name()
+            .to_str()
+            .and_then(|s| s.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let Some(cmdline) = read_proc(pid, "cmdline") else {
+            continue;
+        };
+        let args: Vec<&[u8]> = cmdline.split(|&b| b == 0).collect();
+        let is_rigidsim = args.first().is_some_and(|a| a.ends_with(b"rigidsim"));
+        if !is_rigidsim || !args.contains(&marker) {
+            continue;
+        }
+        let Some(environ) = read_proc(pid, "environ") else {
+            continue;
+        };
+        let rank = environ.split(|&b| b == 0).find_map(|kv| {
+            let kv = std::str::from_utf8(kv).ok()?;
+            kv.strip_prefix("OMPI_COMM_WORLD_RANK=")
+                .or_else(|| kv.strip_prefix("PMIX_RANK="))?
+                .parse::<u32>()
+                .ok()
+        });
+        if let Some(rank) = rank {
+            found.push((pid, rank));
+        }
+    }
+    found
+}
+
+/// `kill -9 PID` (a process of this test's own job, found by `ranks_of_job`).
+fn kill9(pid: u32) -> bool {
+    Command::new("kill")
+        .args(["-9", &pid.to_string()])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// Checks that what rank 0 wrote before it was stopped is readable: the
+/// header, then rows of 15 numbers (the last row possibly without its
+/// newline), or no file at all. Returns the number of rows.
+fn check_partial_trajectory(path: &Path) -> usize {
+    let Ok(bytes) = std::fs::read(path) else {
+        return 0;
+    };
+    let text = String::from_utf8(bytes).expect("trajectory.csv is not UTF-8");
+    let mut lines = text.lines();
+    match lines.next() {
+        None => return 0, // created, nothing flushed yet
+        Some(h) => assert_eq!(h, TRAJECTORY_HEADER, "trajectory.csv header"),
+    }
+    let mut rows = 0;
+    for (n, line) in lines.enumerate() {
+        let fields: Vec<&str> = line.split(',').collect();
+        assert!(
+            fields.len() == 15 && fields.iter().all(|f| f.parse::<f64>().is_ok()),
+            "trajectory.csv line {} is cut or malformed: {line:?}",
+            n + 2
+        );
+        rows += 1;
+    }
+    rows
+}
+
+#[test]
+fn killed_worker_ends_the_job_with_an_error_naming_the_rank() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let out = root.path().join("killed");
+    let scene = scene("load_profile.toml");
+    // 50 s simulated take far longer than the test: the job ends only by the kill.
+    let args = ["--duration", "50", "--no-render"];
+    let what = describe(Ranks::Np(3), &scene, &args);
+    let started = Instant::now();
+    let mut job = spawn(command(Ranks::Np(3), &scene, &out, &args), &out);
+
+    // Wait for the three ranks to exist and rank 0 to have started the run.
+    let victim = loop {
+        if let Some(status) = job.try_wait().unwrap() {
+            panic!(
+                "{what}: ended ({status}) before a worker could be killed; stderr:\n{}",
+                stderr_of(&out)
+            );
+        }
+        let ranks = ranks_of_job(&out);
+        if ranks.len() == 3 && out.join("trajectory.csv").exists() {
+            break ranks.iter().find(|(_, r)| *r == 1).unwrap().0;
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            let _ = job.kill();
+            for (pid, _) in ranks_of_job(&out) {
+                kill9(pid);
+            }
+            panic!("{what}: the ranks did not start within 30 s (found {ranks:?})");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    std::thread::sleep(Duration::from_secs(1));
+    assert!(
+        job.try_wait().unwrap().is_none(),
+        "{what}: ended on its own before the kill"
+    );
+    assert!(kill9(victim), "kill -9 {victim} (rank 1) failed");
+    let killed = Instant::now();
+
+    let Some(status) = wait_for(&mut job, END_AFTER_KILL) else {
+        let left = ranks_of_job(&out);
+        let _ = job.kill();
+        let _ = job.wait();
+        for (pid, _) in &left {
+            kill9(*pid);
+        }
+        panic!(
+            "{what}: still running {END_AFTER_KILL:?} after rank 1 (pid {victim}) was killed: \
+             ranks left {left:?}; stderr:\n{}",
+            stderr_of(&out)
+        );
+    };
+    let ended_in = killed.elapsed();
+    eprintln!(
+        "[cluster_mpi] {what}: rank 1 killed after {:.2} s; job ended {:.2} s later with {status}",
+        (killed - started).as_secs_f64(),
+        ended_in.as_secs_f64()
+    );
+    // Whatever is left of the job (nothing, normally) goes too.
+    for (pid, _) in ranks_of_job(&out) {
+        kill9(pid);
+    }
+    let stderr = stderr_of(&out);
+    assert!(
+        !status.success(),
+        "{what}: exit status 0 after a rank was killed"
+    );
+    assert!(
+        stderr.to_lowercase().contains("rank 1"),
+        "{what}: the message does not name rank 1:\n{stderr}"
+    );
+    // An interrupted run must not look complete.
+    assert!(
+        !out.join("summary.json").exists(),
+        "summary.json written by a run that was killed"
+    );
+    let rows = check_partial_trajectory(&out.join("trajectory.csv"));
+    eprintln!("[cluster_mpi] {rows} complete trajectory rows were kept");
+}
