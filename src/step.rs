@@ -192,6 +192,15 @@ struct Segment {
     torque: Vector3<f64>,
 }
 
+/// An overlap that calls for a rollback: beyond the contact tolerance (or
+/// with no contact points to resolve it), and deeper than the pair already
+/// was when its segment began. An overlap carried in (rounding, or one left
+/// by a step that could not resolve it) is mended by the resting solve, not
+/// by rolling back to a moment that has already passed.
+fn overlaps_more(r: &PairResult, carried: f64) -> bool {
+    r.needs_rollback(CONTACT_TOLERANCE) && (r.contacts.is_empty() || r.depth > carried + TOI_GAP)
+}
+
 impl World {
     pub fn new(scene: Scene) -> World {
         let n = scene.bodies.len();
@@ -299,6 +308,13 @@ impl World {
 
         // build_islands + solve_islands on the contacts touching now.
         let touching = std::mem::take(&mut self.touching);
+        let mut carried: HashMap<(u32, u32), f64> = touching
+            .iter()
+            .map(|t| {
+                let deepest = t.points.iter().map(|p| -p.separation).fold(0.0, f64::max);
+                ((t.a.0, t.b.0), deepest)
+            })
+            .collect();
         let all_moving: Vec<usize> = (0..n).filter(|&i| self.moving(i)).collect();
         self.contact_phase(exec, &touching, &all_moving, &mut seg, h);
 
@@ -325,11 +341,37 @@ impl World {
         let mut last_event: Option<((u32, u32), f64)> = None;
         let mut toi_cache: HashMap<(u32, u32), Option<f64>> = HashMap::new();
         loop {
-            let violation =
-                self.earliest_impact(&pairs, &results, &seg, h, &accepted, &mut toi_cache);
+            let violation = self.earliest_impact(
+                &pairs,
+                &results,
+                &seg,
+                h,
+                &accepted,
+                &mut toi_cache,
+                &carried,
+            );
             let Some((pair, tau)) = violation else { break };
             if events >= MAX_EVENTS_PER_STEP || last_event == Some((pair, tau)) {
                 // No progress: keep the small overlap rather than stall the step.
+                if std::env::var_os("RIGIDSIM_DEBUG").is_some() {
+                    let r = pairs.iter().position(|p| *p == pair).map(|k| {
+                        (
+                            results[k].depth,
+                            results[k].contacts.len(),
+                            results[k].penetrating,
+                        )
+                    });
+                    eprintln!(
+                        "accept t={:.3} pair {:?} tau {:e} events {} seg {:e} {:e} res {:?}",
+                        t0,
+                        pair,
+                        tau,
+                        events,
+                        seg[pair.0 as usize].time,
+                        seg[pair.1 as usize].time,
+                        r
+                    );
+                }
                 accepted.push(pair);
                 self.counters.overlaps_accepted += 1;
                 continue;
@@ -358,6 +400,9 @@ impl World {
                 .filter(|&(a, b)| group.contains(&(a as usize)) || group.contains(&(b as usize)))
                 .collect();
             let at_tau = self.narrowphase_at(exec, &group_pairs, &end);
+            for (k, r) in group_pairs.iter().zip(&at_tau) {
+                carried.insert(*k, if r.penetrating { r.depth } else { 0.0 });
+            }
             let touching_now = self.touching_from(&group_pairs, &at_tau);
             let woken = self.wake_touched(&touching_now, &mut seg, tau, t0);
             let mut members = group.clone();
@@ -527,6 +572,7 @@ impl World {
         h: f64,
         accepted: &[(u32, u32)],
         cache: &mut HashMap<(u32, u32), Option<f64>>,
+        base: &HashMap<(u32, u32), f64>,
     ) -> Option<((u32, u32), f64)> {
         let mut best: Option<((u32, u32), f64)> = None;
         for (k, r) in pairs.iter().zip(results) {
@@ -543,16 +589,17 @@ impl World {
             }
             let (a, b) = (k.0 as usize, k.1 as usize);
             let start = seg[a].time.max(seg[b].time);
-            let interval = if r.needs_rollback(CONTACT_TOLERANCE) {
+            let carried = base.get(k).copied().unwrap_or(0.0);
+            let interval = if overlaps_more(r, carried) {
                 Some(
-                    self.first_overlap_sample(a, b, seg, start, h)
+                    self.first_overlap_sample(a, b, seg, start, h, carried)
                         .unwrap_or((start, h)),
                 )
             } else {
                 // No overlap at the end: a fast pair may still have crossed.
-                self.first_overlap_sample(a, b, seg, start, h)
+                self.first_overlap_sample(a, b, seg, start, h, carried)
             };
-            let tau = interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi));
+            let tau = interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi, carried));
             cache.insert(*k, tau);
             if let Some(tau) = tau {
                 if best.is_none_or(|(bk, bt)| tau < bt || (tau == bt && *k < bk)) {
@@ -573,6 +620,7 @@ impl World {
         seg: &[Segment],
         start: f64,
         h: f64,
+        carried: f64,
     ) -> Option<(f64, f64)> {
         let pa0 = self
             .integrate_segment(a, &seg[a], start - seg[a].time)
@@ -595,7 +643,7 @@ impl World {
         for s in 1..=samples {
             let t = start + (h - start) * s as f64 / samples as f64;
             let r = self.query_at(a, b, seg, t);
-            if r.needs_rollback(CONTACT_TOLERANCE) {
+            if overlaps_more(&r, carried) {
                 return Some((prev, t));
             }
             prev = t;
@@ -614,28 +662,63 @@ impl World {
     }
 
     /// Bisection for the touching instant (SPEC 2.6, fig. 3.16): `lo` is known
-    /// apart, `hi` overlapping; halve until the gap at `lo` is within a
-    /// hundredth of the contact tolerance, 0.1 µm (or the interval is down to
-    /// rounding). At 4.4 m/s (a 1 m drop) 0.1 µm is 23 ns: impact times stay
-    /// well within 1e-6 s over many bounces, for about log2(v·dt / 0.1 µm) ≈
-    /// 19 V-Clip queries per impact.
-    fn bisect(&mut self, a: usize, b: usize, seg: &[Segment], mut lo: f64, mut hi: f64) -> f64 {
+    /// apart (or no deeper than the overlap `carried` into the segment), `hi`
+    /// overlapping deeper. Halves until the interval is what the pair's
+    /// relative speed covers in a 0.1 µm gap (`TOI_GAP`), or a separated `lo`
+    /// is within that gap. At 4.4 m/s (a 1 m drop) that is 23 ns: impact times
+    /// stay well within 1e-6 s over many bounces, for about
+    /// log2(v·dt / 0.1 µm) ≈ 19 V-Clip queries per impact.
+    fn bisect(
+        &mut self,
+        a: usize,
+        b: usize,
+        seg: &[Segment],
+        mut lo: f64,
+        mut hi: f64,
+        carried: f64,
+    ) -> f64 {
+        // Forces are constant over a segment, so speeds peak at its ends.
+        let speed = self
+            .relative_speed_bound(a, b, seg, lo)
+            .max(self.relative_speed_bound(a, b, seg, hi))
+            .max(1e-9);
+        let resolution = (TOI_GAP / speed).max(1e-13 * self.scene.settings.dt);
         for _ in 0..64 {
-            if hi - lo <= 1e-13 * self.scene.settings.dt {
+            if hi - lo <= resolution {
                 break;
             }
             let mid = 0.5 * (lo + hi);
             let r = self.query_at(a, b, seg, mid);
-            if r.penetrating && r.depth > 0.0 || r.needs_rollback(CONTACT_TOLERANCE) {
+            if overlaps_more(&r, carried) || (r.penetrating && r.depth > carried + TOI_GAP) {
                 hi = mid;
             } else {
                 lo = mid;
-                if r.distance <= TOI_GAP {
+                if !r.penetrating && r.distance <= TOI_GAP {
                     break;
                 }
             }
         }
         lo
+    }
+
+    /// Upper bound of how fast any point of `a` approaches any point of `b`
+    /// at time `t` (linear plus angular speed times outer radius).
+    fn relative_speed_bound(&self, a: usize, b: usize, seg: &[Segment], t: f64) -> f64 {
+        let bound = |i: usize| {
+            let s = self.integrate_segment(i, &seg[i], t - seg[i].time);
+            let body = Body {
+                state: s,
+                ..self.bodies[i].clone()
+            };
+            let o = self.object(i);
+            (
+                s.velocity,
+                body.angular_velocity(o).norm() * o.outer_radius(),
+            )
+        };
+        let (va, wa) = bound(a);
+        let (vb, wb) = bound(b);
+        (va - vb).norm() + wa + wb
     }
 
     /// Bodies that must roll back with an impact of `pair`: the moving bodies

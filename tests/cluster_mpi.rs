@@ -3,8 +3,8 @@
 //! rank's share, small scenes kept on rank 0, and a rank killed mid-run.
 //!
 //! Every test runs `mpirun --oversubscribe -np N rigidsim SCENE --out TMP
-//! --no-progress …` on a short run (at most 1 s simulated) and reads
-//! `TMP/summary.json`. CI has 2 cores, so -np 3 and 5 are oversubscribed and
+//! --no-progress …` on a short run (at most 1 s simulated; the kill test
+//! stops a long one after about a second) and reads `TMP/summary.json`. CI has 2 cores, so -np 3 and 5 are oversubscribed and
 //! wall times here are no performance numbers. Runs are serialised (one
 //! `mpirun` at a time, see `one_at_a_time`): busy-polling ranks of two jobs on
 //! 2 cores would slow each other and blur the slowed rank's measured speed.
@@ -617,10 +617,11 @@ fn render_rank_draws_every_frame_with_three_ranks() {
 /// The band is wide because (a) speeds start equal and are smoothed (weight
 /// 0.3), so the first distributed frames split evenly; (b) a frame has only a
 /// dozen pairs, so a share moves in whole tasks; (c) busy times are measured
-/// on 2 oversubscribed cores. Its ends still mean something: below 0.2 (speed
-/// estimates off by more than 40 %) the slowed rank is starved; above 0.6 the
-/// scheduler barely reacts (two equal workers give about 1).
-const SLOW_SHARE_BAND: (f64, f64) = (0.2, 0.6);
+/// on 2 oversubscribed cores. Its ends still mean something: below 0.18
+/// (about half the fair share) the slowed rank is starved, i.e. its speed is
+/// underestimated about twofold; above 0.6 the scheduler barely reacts (two
+/// equal workers give about 1).
+const SLOW_SHARE_BAND: (f64, f64) = (0.18, 0.6);
 
 #[test]
 fn slowed_rank_gets_work_in_proportion_to_its_speed() {
@@ -689,6 +690,10 @@ fn small_scene_stays_on_rank_0() {
 /// notices a dead child at once; seconds are for an oversubscribed machine).
 const END_AFTER_KILL: Duration = Duration::from_secs(15);
 
+/// How long a stalled worker may hold the run: generous against a busy lab
+/// PC, short against a person waiting at a frozen progress bar.
+const END_AFTER_STALL: Duration = Duration::from_secs(30);
+
 fn read_proc(pid: u32, file: &str) -> Option<Vec<u8>> {
     std::fs::read(format!("/proc/{pid}/{file}")).ok()
 }
@@ -745,6 +750,18 @@ fn kill9(pid: u32) -> bool {
         .is_ok_and(|s| s.success())
 }
 
+/// Ends what is left of this test's job: its ranks first (so that mpirun,
+/// their parent, reaps them rather than leaving zombies), then mpirun.
+fn end_job(job: &mut Child, out: &Path) {
+    for (pid, _) in ranks_of_job(out) {
+        kill9(pid);
+    }
+    if wait_for(job, Duration::from_secs(5)).is_none() {
+        let _ = job.kill();
+        let _ = job.wait();
+    }
+}
+
 /// Checks that what rank 0 wrote before it was stopped is readable: the
 /// header, then rows of 15 numbers (the last row possibly without its
 /// newline), or no file at all. Returns the number of rows.
@@ -777,8 +794,9 @@ fn killed_worker_ends_the_job_with_an_error_naming_the_rank() {
     let root = temp_root();
     let out = root.path().join("killed");
     let scene = scene("load_profile.toml");
-    // 50 s simulated take far longer than the test: the job ends only by the kill.
-    let args = ["--duration", "50", "--no-render"];
+    // 600 s simulated take minutes even on a fast PC (1 s takes about 0.2 s
+    // here): the job can end only by the kill.
+    let args = ["--duration", "600", "--no-render"];
     let what = describe(Ranks::Np(3), &scene, &args);
     let started = Instant::now();
     let mut job = spawn(command(Ranks::Np(3), &scene, &out, &args), &out);
@@ -796,10 +814,7 @@ fn killed_worker_ends_the_job_with_an_error_naming_the_rank() {
             break ranks.iter().find(|(_, r)| *r == 1).unwrap().0;
         }
         if started.elapsed() > Duration::from_secs(30) {
-            let _ = job.kill();
-            for (pid, _) in ranks_of_job(&out) {
-                kill9(pid);
-            }
+            end_job(&mut job, &out);
             panic!("{what}: the ranks did not start within 30 s (found {ranks:?})");
         }
         std::thread::sleep(Duration::from_millis(50));
@@ -809,16 +824,15 @@ fn killed_worker_ends_the_job_with_an_error_naming_the_rank() {
         job.try_wait().unwrap().is_none(),
         "{what}: ended on its own before the kill"
     );
-    assert!(kill9(victim), "kill -9 {victim} (rank 1) failed");
+    if !kill9(victim) {
+        end_job(&mut job, &out);
+        panic!("kill -9 {victim} (rank 1) failed");
+    }
     let killed = Instant::now();
 
     let Some(status) = wait_for(&mut job, END_AFTER_KILL) else {
         let left = ranks_of_job(&out);
-        let _ = job.kill();
-        let _ = job.wait();
-        for (pid, _) in &left {
-            kill9(*pid);
-        }
+        end_job(&mut job, &out);
         panic!(
             "{what}: still running {END_AFTER_KILL:?} after rank 1 (pid {victim}) was killed: \
              ranks left {left:?}; stderr:\n{}",
@@ -851,4 +865,60 @@ fn killed_worker_ends_the_job_with_an_error_naming_the_rank() {
     );
     let rows = check_partial_trajectory(&out.join("trajectory.csv"));
     eprintln!("[cluster_mpi] {rows} complete trajectory rows were kept");
+}
+
+/// A worker that stops answering (here: SIGSTOP, like a PC that froze)
+/// must end the run too, with a message naming it (issue 5: "dies or stops
+/// answering"). Rank 0 has no reply timeout yet, so today it waits forever.
+#[test]
+#[ignore = "rank 0 waits forever for a stopped worker (no reply timeout yet, issue 5)"]
+fn stalled_worker_ends_the_job_with_an_error_naming_the_rank() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let out = root.path().join("stalled");
+    let scene = scene("load_profile.toml");
+    let args = ["--duration", "600", "--no-render"];
+    let what = describe(Ranks::Np(3), &scene, &args);
+    let mut job = spawn(command(Ranks::Np(3), &scene, &out, &args), &out);
+    let started = Instant::now();
+    let victim = loop {
+        let ranks = ranks_of_job(&out);
+        if ranks.len() == 3 && out.join("trajectory.csv").exists() {
+            break ranks.iter().find(|(_, r)| *r == 1).unwrap().0;
+        }
+        if let Some(status) = job.try_wait().unwrap() {
+            panic!("{what}: ended ({status}) before rank 1 could be stopped");
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            end_job(&mut job, &out);
+            panic!("{what}: the ranks did not start within 30 s (found {ranks:?})");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    std::thread::sleep(Duration::from_secs(1));
+    let stopped = Command::new("kill")
+        .args(["-STOP", &victim.to_string()])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !stopped {
+        end_job(&mut job, &out);
+        panic!("kill -STOP {victim} (rank 1) failed");
+    }
+    let status = wait_for(&mut job, END_AFTER_STALL);
+    end_job(&mut job, &out);
+    let stderr = stderr_of(&out);
+    let Some(status) = status else {
+        panic!(
+            "{what}: still running {END_AFTER_STALL:?} after rank 1 (pid {victim}) stopped \
+             answering: rank 0 has no reply timeout; stderr:\n{stderr}"
+        );
+    };
+    assert!(
+        !status.success(),
+        "{what}: exit status 0 with a stalled rank"
+    );
+    assert!(
+        stderr.contains("rank 1"),
+        "{what}: the message does not name rank 1:\n{stderr}"
+    );
 }

@@ -544,12 +544,21 @@ shape = {{ sphere = {{ radius = 0.2, subdivisions = 3 }} }}
 mass = 1.0
 "
     ));
-    assert_eq!(object(&scene, "cube").spheres.len(), 1, "a cube needs one sphere");
-    assert!(object(&scene, "rod").spheres.len() >= 3, "a long rod gets several spheres");
+    assert_eq!(
+        object(&scene, "cube").spheres.len(),
+        1,
+        "a cube needs one sphere"
+    );
+    assert!(
+        object(&scene, "rod").spheres.len() >= 3,
+        "a long rod gets several spheres"
+    );
     // Points of each convex part: its vertices and seeded convex combinations of them.
     let mut seed = 1u64;
     let mut uniform = move || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (seed >> 11) as f64 / (1u64 << 53) as f64
     };
     for o in &scene.objects {
@@ -566,7 +575,11 @@ mass = 1.0
                     .spheres
                     .iter()
                     .any(|s| (x - s.center).norm() <= s.radius * (1.0 + 1e-9));
-                assert!(inside, "{}: point {x:?} of part {pi} is in no sphere", o.name);
+                assert!(
+                    inside,
+                    "{}: point {x:?} of part {pi} is in no sphere",
+                    o.name
+                );
                 let own = (x - p.sphere.center).norm() <= p.sphere.radius * (1.0 + 1e-9);
                 assert!(own, "{}: point {x:?} outside its part's sphere", o.name);
             }
@@ -582,7 +595,10 @@ fn given_spheres_that_miss_a_vertex_are_refused() {
         )),
         "objects.thing.spheres",
     );
-    assert_mentions(&e, &["do not enclose vertex", "part 'objects.thing.shape.box'"]);
+    assert_mentions(
+        &e,
+        &["do not enclose vertex", "part 'objects.thing.shape.box'"],
+    );
 }
 
 // ------------------------------------------------------------- nut and bolt
@@ -716,7 +732,7 @@ fn ascii_stl_box_matches_box_mass_properties() {
 
 /// Binary STL: 80-byte header, triangle count, then per triangle a normal,
 /// three corners (f32, little-endian) and a 2-byte attribute.
-fn write_binary_stl(path: &Path, h: [f32; 3]) {
+fn write_binary_stl(path: &Path, header: &str, h: [f32; 3]) {
     let c = |x: f32, y: f32, z: f32| [x * h[0], y * h[1], z * h[2]];
     let v = [
         c(-1., -1., -1.),
@@ -736,7 +752,8 @@ fn write_binary_stl(path: &Path, h: [f32; 3]) {
         [2, 3, 7, 6],
         [3, 0, 4, 7],
     ];
-    let mut bytes = vec![0u8; 80];
+    let mut bytes = header.as_bytes().to_vec();
+    bytes.resize(80, b' ');
     bytes.extend_from_slice(&12u32.to_le_bytes());
     for q in quads {
         for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
@@ -754,17 +771,16 @@ fn write_binary_stl(path: &Path, h: [f32; 3]) {
 
 #[test]
 fn binary_stl_box_matches_box_mass_properties() {
-    let dir = tempfile::tempdir().unwrap();
-    write_binary_stl(&dir.path().join("box.stl"), [0.5, 0.25, 0.125]);
-    let text = one_object("shape = { mesh = { path = \"box.stl\" } }\nmass = 2.0");
-    std::fs::write(dir.path().join("scene.toml"), text).unwrap();
-    let scene = scene::load(&dir.path().join("scene.toml")).unwrap_or_else(|e| panic!("{e}"));
-    assert_matches_box(
-        object(&scene, "thing"),
-        2.0,
-        [0.5, 0.25, 0.125],
-        "binary STL box",
-    );
+    // Many exporters start binary headers with "solid", the ASCII keyword.
+    for header in ["binary box", "solid box (binary)"] {
+        let dir = tempfile::tempdir().unwrap();
+        write_binary_stl(&dir.path().join("box.stl"), header, [0.5, 0.25, 0.125]);
+        let text = one_object("shape = { mesh = { path = \"box.stl\" } }\nmass = 2.0");
+        std::fs::write(dir.path().join("scene.toml"), text).unwrap();
+        let scene = scene::load(&dir.path().join("scene.toml")).unwrap_or_else(|e| panic!("{e}"));
+        let what = format!("binary STL box, header {header:?}");
+        assert_matches_box(object(&scene, "thing"), 2.0, [0.5, 0.25, 0.125], &what);
+    }
 }
 
 #[test]
@@ -997,6 +1013,15 @@ fn compound_part_of_zero_radius_is_named() {
         "objects.thing.shape.compound[1].shape.sphere.radius",
     );
     assert_mentions(&e, &["positive"]);
+}
+
+#[test]
+fn nut_hole_too_wide_for_its_hexagon_is_refused() {
+    let e = expect_error(
+        &one_object("shape = { nut = { across_flats = 0.04, hole_radius = 0.021 } }\nmass = 1.0"),
+        "objects.thing.shape.nut.hole_radius",
+    );
+    assert_mentions(&e, &["across_flats"]);
 }
 
 #[test]

@@ -661,20 +661,25 @@ fn edge_lying_in_a_voronoi_plane_does_not_cycle() {
 
 /// A vertex on the rim of a face's prism, under the face, with an edge that
 /// rises out of the prism: the clipped edge has zero length, and the walk
-/// must follow the edge's slope rather than fall back to the vertex.
+/// must follow the edge's slope rather than fall back to the vertex. B is a
+/// tetrahedron touching A's x = 0.5 side with its apex.
 #[test]
 fn vertex_on_a_prism_rim_below_the_face_does_not_cycle() {
     let a = cuboid(0.5, 2.0, 0.5);
-    let b = cuboid(0.5, 0.5, 0.5);
-    let s = FRAC_PI_4.sin();
-    // B turned 45° about y puts a corner at (-s, -0.5, 0) with edges rising
-    // and falling at 45° towards +x; place that corner on A's x = 0.5 face.
-    let turn = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), FRAC_PI_4);
-    for z in [0.2, 0.0, -0.3] {
-        let pb = pose(v(0.5 + s, 0.0, z), turn);
-        assert_every_warm_start_agrees(&a, &at(0.0, 0.0, 0.0), &b, &pb);
-        let r = closest_features(&a, &at(0.0, 0.0, 0.0), &b, &pb, None);
-        assert!(r.distance.abs() < 1e-15, "{r:?}");
+    for rise in [0.5, 0.1, -0.2] {
+        let b = ConvexPolyhedron::hull(&[
+            v(0.0, 0.0, 0.0),
+            v(1.0, 0.0, rise),
+            v(0.3, 1.0, -0.4),
+            v(0.3, -1.0, -0.4),
+        ])
+        .unwrap();
+        for z in [0.2, 0.0, -0.3] {
+            let pb = at(0.5, 0.1, z);
+            assert_every_warm_start_agrees(&a, &at(0.0, 0.0, 0.0), &b, &pb);
+            let r = closest_features(&a, &at(0.0, 0.0, 0.0), &b, &pb, None);
+            assert!(r.distance.abs() < 1e-15, "{r:?}");
+        }
     }
 }
 
@@ -1068,6 +1073,112 @@ fn hull_merges_coplanar_points_and_rejects_flat_input() {
         ConvexPolyhedron::hull(&line).unwrap_err(),
         PolyhedronError::DegenerateHull { shape: "collinear" }
     );
+}
+
+/// Points on a 5×5×5 lattice (every face full of coplanar and collinear
+/// points) and on a sphere (all cospherical): the hull is still exact.
+#[test]
+fn hull_of_lattice_and_cospherical_points() {
+    let lattice: Vec<_> = (0..125)
+        .map(|i| {
+            v(
+                (i % 5) as f64 * 0.25,
+                (i / 5 % 5) as f64 * 0.25,
+                (i / 25) as f64 * 0.25,
+            )
+        })
+        .collect();
+    let p = ConvexPolyhedron::hull(&lattice).unwrap();
+    assert_eq!(
+        (p.vertices().len(), p.edges().len(), p.face_count()),
+        (8, 12, 6)
+    );
+    // A cube lattice seen from a skew frame: same answer.
+    let turn = UnitQuaternion::from_euler_angles(0.3, -0.7, 1.1);
+    let turned: Vec<_> = lattice
+        .iter()
+        .map(|x| turn * x + v(10.0, -3.0, 2.0))
+        .collect();
+    let p = ConvexPolyhedron::hull(&turned).unwrap();
+    assert_eq!((p.vertices().len(), p.face_count()), (8, 6));
+    // An octahedron's 6 vertices plus the midpoints of its edges.
+    let mut octa = vec![
+        v(1.0, 0.0, 0.0),
+        v(-1.0, 0.0, 0.0),
+        v(0.0, 1.0, 0.0),
+        v(0.0, -1.0, 0.0),
+        v(0.0, 0.0, 1.0),
+        v(0.0, 0.0, -1.0),
+    ];
+    for i in 0..6 {
+        for j in i + 1..6 {
+            if (octa[i] + octa[j]).norm() > 0.5 {
+                octa.push((octa[i] + octa[j]) / 2.0);
+            }
+        }
+    }
+    let p = ConvexPolyhedron::hull(&octa).unwrap();
+    assert_eq!((p.vertices().len(), p.face_count()), (6, 8));
+    let g = geodesic(500, 1.0);
+    assert_eq!(g.face_count(), 996);
+}
+
+/// Near-duplicate, nearly coplanar, tiny and far-off point sets: `hull`
+/// either builds a valid polyhedron holding every point or reports an
+/// error; it never panics.
+#[test]
+fn hull_survives_nasty_point_sets() {
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let (mut built, mut refused) = (0, 0);
+    for _ in 0..400 {
+        let scale = [1e-6, 1.0, 1e3][rng.random_range(0..3)];
+        let offset = v(1.0, -2.0, 0.5) * [0.0, 1.0, 1e6][rng.random_range(0..3)];
+        let flat = [1.0, 1e-3, 1e-10, 0.0][rng.random_range(0..4)];
+        let mut pts: Vec<_> = (0..rng.random_range(4..30))
+            .map(|_| {
+                v(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    flat * rng.random_range(-1.0..1.0),
+                )
+            })
+            .collect();
+        // Near-duplicates of some points.
+        for _ in 0..rng.random_range(0..10) {
+            let p = pts[rng.random_range(0..pts.len())];
+            let jitter = [0.0, 1e-14, 1e-9, 1e-6][rng.random_range(0..4)];
+            pts.push(p + random_direction(&mut rng) * jitter);
+        }
+        let pts: Vec<_> = pts.iter().map(|p| p * scale + offset).collect();
+        match ConvexPolyhedron::hull(&pts) {
+            Ok(p) => {
+                built += 1;
+                // HULL_MERGE_REL_TOL of the size, or 64 ulps of far-off coordinates.
+                let coordinate_ulp = f64::EPSILON * (offset.norm() + scale);
+                let tol = 1e-8 * p.scale() + 128.0 * coordinate_ulp;
+                for x in &pts {
+                    let o = outside(&p, &Isometry3::identity(), x);
+                    assert!(
+                        o <= tol,
+                        "outside by {o:e} (tol {tol:e}), scale {scale} offset {offset:?} flat {flat}, size {}",
+                        p.scale()
+                    );
+                }
+            }
+            Err(e) => {
+                refused += 1;
+                // Only sets flat to within the coordinates' rounding may be refused.
+                let thickness = flat * scale;
+                let coordinate_ulp = f64::EPSILON * (offset.norm() + scale);
+                assert!(
+                    flat <= 1e-10 || thickness < 1e3 * coordinate_ulp,
+                    "{e} (flat {flat}, scale {scale})"
+                );
+            }
+        }
+    }
+    println!("built {built}, refused {refused}");
+    assert!(built > 200);
 }
 
 #[test]

@@ -67,9 +67,9 @@ pub fn contact_points(
     } else {
         // Touching: every direction in the overlap of the two features'
         // normal cones separates them, and the separating-axis test returns
-        // one at the rim of that set. The features usually name the natural
-        // one, but not always (an edge touching a face at the face's rim),
-        // so it must pass as a separating axis.
+        // one at the rim of that set. The smallest features holding the
+        // touching point name the natural one, unless that point is a vertex
+        // on a vertex, so it must still pass as a separating axis.
         let slack = 2.0 * NORMAL_FROM_POINTS_REL * size;
         match touching_normal(a, pose_a, b, pose_b, &proximity.point_b) {
             Some(m) if separation_along(a, pose_a, b, pose_b, &m) >= -slack => m,
@@ -229,13 +229,13 @@ fn feature_at(p: &ConvexPolyhedron, pose: &Isometry3<f64>, x: &Vector3<f64>) -> 
     if on.len() == 1 {
         return Feature::Face(on[0]);
     }
-    if on.len() == 2 {
-        if let Some(e) = p.faces()[on[0] as usize].edges.iter().find(|&&e| {
+    if on.len() == 2
+        && let Some(e) = p.faces()[on[0] as usize].edges.iter().find(|&&e| {
             let ed = p.edges()[e as usize];
             ed.left == on[1] || ed.right == on[1]
-        }) {
-            return Feature::Edge(*e);
-        }
+        })
+    {
+        return Feature::Edge(*e);
     }
     let v = (0..p.vertex_count())
         .min_by(|&i, &j| {

@@ -42,8 +42,15 @@ pub const VOLUME_REL_TOL: f64 = 1e-9;
 
 /// `hull` treats a point within this fraction of the bounding-box diagonal
 /// of a face plane as lying on it: far above f64 rounding (1e-16) so that
-/// visibility decisions are stable, far below `PLANARITY_REL_TOL`.
+/// visibility decisions are stable, far below `PLANARITY_REL_TOL`. (Every
+/// relative tolerance here is floored at 64 ulps of the largest coordinate.)
 pub const HULL_REL_EPS: f64 = 1e-9;
+
+/// `hull` merges its triangles, and checks them for convexity, within this
+/// fraction of the diagonal rather than `PLANARITY_REL_TOL`: its output is
+/// convex to `HULL_REL_EPS` by construction, and a looser merge would refit
+/// face planes past input points (which stay inside to within this).
+pub const HULL_MERGE_REL_TOL: f64 = 10.0 * HULL_REL_EPS;
 
 /// Why a mesh or a point set is not a usable convex polyhedron. The messages
 /// are phrased to follow a prefix such as "part 'leg': ". Indices are those
@@ -112,6 +119,11 @@ pub enum PolyhedronError {
     TooFewPoints { count: usize },
     #[error("has all its points (nearly) {shape}: a hull needs volume")]
     DegenerateHull { shape: &'static str },
+    #[error(
+        "has points too close to degenerate for a robust hull \
+         (weld near-duplicate points first)"
+    )]
+    HullNumerics,
 }
 
 fn fmt_len(d: f64) -> String {
@@ -183,6 +195,7 @@ pub struct ConvexPolyhedron {
     face_planes: Vec<VoronoiPlane>,
     centroid: Vector3<f64>,
     scale: f64,
+    extent: f64,
 }
 
 impl ConvexPolyhedron {
@@ -196,6 +209,16 @@ impl ConvexPolyhedron {
     pub fn from_faces(
         vertices: Vec<Vector3<f64>>,
         faces: Vec<Vec<usize>>,
+    ) -> Result<Self, PolyhedronError> {
+        Self::from_faces_within(vertices, faces, PLANARITY_REL_TOL)
+    }
+
+    /// `from_faces` with its merge and convexity tolerance, `rel_tol` ×
+    /// bounding-box diagonal, as a parameter.
+    fn from_faces_within(
+        vertices: Vec<Vector3<f64>>,
+        faces: Vec<Vec<usize>>,
+        rel_tol: f64,
     ) -> Result<Self, PolyhedronError> {
         use PolyhedronError as E;
         for (i, v) in vertices.iter().enumerate() {
@@ -311,7 +334,7 @@ impl ConvexPolyhedron {
         };
         let scale = bbox_diagonal(used_points());
         let centre = used_points().sum::<Vector3<f64>>() / used_points().count() as f64;
-        let tol = PLANARITY_REL_TOL * scale;
+        let tol = (rel_tol * scale).max(coordinate_rounding(used_points()));
 
         // Newell's normal: robust for non-planar or nearly degenerate polygons,
         // its length is twice the polygon area.
@@ -346,12 +369,26 @@ impl ConvexPolyhedron {
         // Merge coplanar neighbours by region growing from the largest faces.
         // Every face of a group must lie within `tol` of the seed's plane (not
         // just of its neighbour's), so gently curved surfaces do not chain.
-        let degenerate_area = (1e-12 * scale) * scale;
+        // A sliver, whose height (2 area / longest edge) is within `tol`, has
+        // no trustworthy normal; it lies along its long edge, which the
+        // neighbouring groups' planes hold, so the first group to reach it
+        // takes it.
+        let sliver: Vec<bool> = faces
+            .iter()
+            .zip(&newell)
+            .map(|(face, twice_area)| {
+                let m = face.len();
+                let longest = (0..m)
+                    .map(|k| (vertices[face[(k + 1) % m]] - vertices[face[k]]).norm())
+                    .fold(0.0, f64::max);
+                twice_area.norm() <= tol * longest
+            })
+            .collect();
         let mut order: Vec<usize> = (0..faces.len()).collect();
         order.sort_by(|&x, &y| {
-            newell[y]
-                .norm()
-                .total_cmp(&newell[x].norm())
+            sliver[x]
+                .cmp(&sliver[y])
+                .then(newell[y].norm().total_cmp(&newell[x].norm()))
                 .then(x.cmp(&y))
         });
         let mut group = vec![usize::MAX; faces.len()];
@@ -360,7 +397,7 @@ impl ConvexPolyhedron {
             if group[seed] != usize::MAX {
                 continue;
             }
-            if newell[seed].norm() <= degenerate_area {
+            if sliver[seed] {
                 return Err(E::DegenerateFace { face: seed });
             }
             let g = seeds.len();
@@ -381,13 +418,11 @@ impl ConvexPolyhedron {
                     if group[h] != usize::MAX {
                         continue;
                     }
-                    let flat = newell[h].norm() <= degenerate_area;
-                    let same_side = flat || newell[h].dot(&n) > 0.0;
-                    if same_side
+                    let coplanar = newell[h].dot(&n) > 0.0
                         && faces[h]
                             .iter()
-                            .all(|&q| (n.dot(&vertices[q]) - off).abs() <= tol)
-                    {
+                            .all(|&q| (n.dot(&vertices[q]) - off).abs() <= tol);
+                    if sliver[h] || coplanar {
                         group[h] = g;
                         stack.push(h);
                     }
@@ -500,11 +535,12 @@ impl ConvexPolyhedron {
 
     /// Convex hull of a point set (quickhull), with coplanar faces merged.
     /// Points within `HULL_REL_EPS` × bounding-box diagonal outside a face are
-    /// treated as on it. Fails on fewer than 4 points or when the points are
+    /// treated as on it; every point ends up inside the hull or within
+    /// `HULL_MERGE_REL_TOL` × diagonal of it. Fails on fewer than 4 points or when the points are
     /// (nearly) coincident, collinear or coplanar.
     pub fn hull(points: &[Vector3<f64>]) -> Result<Self, PolyhedronError> {
         let (vertices, faces) = quickhull(points)?;
-        Self::from_faces(vertices, faces)
+        Self::from_faces_within(vertices, faces, HULL_MERGE_REL_TOL)
     }
 
     /// The same shape moved rigidly by `iso` (placing a compound part, or
@@ -643,6 +679,7 @@ impl ConvexPolyhedron {
 
         let centroid = vertices.iter().sum::<Vector3<f64>>() / vertices.len() as f64;
         let scale = bbox_diagonal(vertices.iter());
+        let extent = vertices.iter().map(|v| v.norm()).fold(0.0, f64::max);
         Self {
             vertices,
             edges,
@@ -657,6 +694,7 @@ impl ConvexPolyhedron {
             face_planes,
             centroid,
             scale,
+            extent,
         }
     }
 
@@ -711,6 +749,12 @@ impl ConvexPolyhedron {
     /// Bounding-box diagonal; the length scale of relative tolerances.
     pub fn scale(&self) -> f64 {
         self.scale
+    }
+
+    /// Largest distance of a vertex from the local origin: the magnitude of
+    /// local coordinates, which sets their rounding level.
+    pub fn local_extent(&self) -> f64 {
+        self.extent
     }
 
     /// Voronoi planes of vertex `v`, aligned with `vertex_edges(v)`.
@@ -824,14 +868,13 @@ pub fn weld(
             'search: for dx in -1..=1 {
                 for dy in -1..=1 {
                     for dz in -1..=1 {
-                        if let Some(list) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
-                            if let Some(&r) = list
+                        if let Some(list) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz])
+                            && let Some(&r) = list
                                 .iter()
                                 .find(|&&r| (vertices[reps[r]] - p).norm() <= tol)
-                            {
-                                found = Some(r);
-                                break 'search;
-                            }
+                        {
+                            found = Some(r);
+                            break 'search;
                         }
                     }
                 }
@@ -887,6 +930,13 @@ pub fn weld(
     (out_vertices, new_faces)
 }
 
+/// A length below which differences of these coordinates are rounding: 64
+/// ulps of the largest coordinate. Relative tolerances never go below it, or
+/// a small part placed far from its origin would be judged by noise.
+fn coordinate_rounding<'a>(points: impl Iterator<Item = &'a Vector3<f64>>) -> f64 {
+    64.0 * f64::EPSILON * points.map(|p| p.amax()).fold(0.0, f64::max)
+}
+
 fn bbox_diagonal<'a>(points: impl Iterator<Item = &'a Vector3<f64>>) -> f64 {
     let mut lo = Vector3::repeat(f64::INFINITY);
     let mut hi = Vector3::repeat(f64::NEG_INFINITY);
@@ -937,10 +987,11 @@ impl HullFace {
     }
 }
 
+/// Vertices and CCW face loops.
+type Mesh = (Vec<Vector3<f64>>, Vec<Vec<usize>>);
+
 /// Quickhull: returns the input points and CCW triangles of their hull.
-fn quickhull(
-    points: &[Vector3<f64>],
-) -> Result<(Vec<Vector3<f64>>, Vec<Vec<usize>>), PolyhedronError> {
+fn quickhull(points: &[Vector3<f64>]) -> Result<Mesh, PolyhedronError> {
     use PolyhedronError as E;
     if points.len() < 4 {
         return Err(E::TooFewPoints {
@@ -953,7 +1004,7 @@ fn quickhull(
         }
     }
     let scale = bbox_diagonal(points.iter());
-    let eps = HULL_REL_EPS * scale;
+    let eps = (HULL_REL_EPS * scale).max(coordinate_rounding(points.iter()));
     let coincident = E::DegenerateHull {
         shape: "coincident",
     };
@@ -1033,6 +1084,7 @@ fn quickhull(
         }
     }
 
+    let lost = E::HullNumerics;
     let mut pending: Vec<usize> = (0..faces.len()).collect();
     let mut visible_mark: Vec<bool> = vec![false; faces.len()];
     while let Some(f) = pending.pop() {
@@ -1059,22 +1111,34 @@ fn quickhull(
             k += 1;
             let v = faces[g].v;
             for e in 0..3 {
-                let h = edge_face[&(v[(e + 1) % 3], v[e])];
+                let Some(&h) = edge_face.get(&(v[(e + 1) % 3], v[e])) else {
+                    return Err(lost);
+                };
                 if !visible_mark[h] && faces[h].distance(&p) > eps {
                     visible_mark[h] = true;
                     visible.push(h);
                 }
             }
         }
+        // The horizon must be one simple loop, or the new cone of faces
+        // would not close up: each of its vertices starts exactly one edge.
         let mut horizon = Vec::new();
         for &g in &visible {
             let v = faces[g].v;
             for e in 0..3 {
                 let (a, b) = (v[e], v[(e + 1) % 3]);
-                if !visible_mark[edge_face[&(b, a)]] {
+                let Some(&h) = edge_face.get(&(b, a)) else {
+                    return Err(lost);
+                };
+                if !visible_mark[h] {
                     horizon.push((a, b));
                 }
             }
+        }
+        let mut tails: Vec<usize> = horizon.iter().map(|&(a, _)| a).collect();
+        tails.sort_unstable();
+        if tails.windows(2).any(|w| w[0] == w[1]) {
+            return Err(lost);
         }
         let mut orphans = Vec::new();
         for &g in &visible {

@@ -26,9 +26,16 @@
 //! `D'(λ_lo) > 0` means the minimum lies below `λ_lo`, across the plane of
 //! `N_lo`, and X moves to `N_lo`; `D'(λ_hi) < 0` likewise moves X to `N_hi`.
 //!
-//! All comparisons are with exact zero, as in the original. Floating point
-//! can still cycle on degenerate configurations, so the walk is bounded and
-//! then falls back to an exhaustive search that is slow but always right.
+//! The original compares with exact zero. Here plane distances, slopes and
+//! height differences within a few ulps of the coordinates' magnitude count
+//! as zero (`ROUNDING_ULPS`), which is what the theory's tie-breaks assume:
+//! degenerate contacts (a box resting on a box, an edge through an edge)
+//! otherwise read a sign from rounding noise and cycle. Should the walk still
+//! cycle, it is bounded and then falls back to an exhaustive search that is
+//! slow but always right.
+//!
+//! Features that meet (distance 0) cannot tell touching from overlapping; a
+//! separating-axis test settles those.
 
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -106,8 +113,8 @@ pub fn closest_features_with_limit(
     max_iterations: u32,
 ) -> Proximity {
     let b_to_a = pose_a.inv_mul(pose_b);
-    let noise =
-        ROUNDING_ULPS * f64::EPSILON * (b_to_a.translation.vector.norm() + a.scale() + b.scale());
+    let magnitude = b_to_a.translation.vector.norm() + a.local_extent() + b.local_extent();
+    let noise = ROUNDING_ULPS * f64::EPSILON * magnitude;
     let sa = Side {
         poly: a,
         from_other: b_to_a,
@@ -171,10 +178,11 @@ pub fn closest_features_with_limit(
     // cubes meeting corner to corner and two identical cubes at one pose
     // both end on coincident vertices. The separating-axis test decides.
     let size = a.scale().min(b.scale());
-    if !found.penetrating && found.distance <= TOUCHING_REL_TOL * size {
-        if let Some(deep) = sat_penetration(a, pose_a, b, pose_b, -TOUCHING_REL_TOL * size) {
-            return Proximity { iterations, ..deep };
-        }
+    if !found.penetrating
+        && found.distance <= TOUCHING_REL_TOL * size
+        && let Some(deep) = sat_penetration(a, pose_a, b, pose_b, -TOUCHING_REL_TOL * size)
+    {
+        return Proximity { iterations, ..deep };
     }
     found
 }
@@ -199,9 +207,9 @@ impl Side<'_> {
     }
 }
 
-/// Distance derivatives and distance differences within this many ulps of
-/// the coordinates' magnitude (the pair's offset plus both sizes) count as
-/// zero. The theory's tie-breaks rely on exact zeros, e.g. an edge exactly
+/// Plane distances, distance derivatives and height differences within this
+/// many ulps of the coordinates' magnitude (the pair's offset plus each
+/// polyhedron's farthest vertex from its origin) count as zero. The theory's tie-breaks rely on exact zeros, e.g. an edge exactly
 /// parallel to a face has zero slope where it leaves the face's prism; read
 /// from rounding noise, such a sign sends the walk back and forth between
 /// the face and its edge forever.
@@ -342,15 +350,15 @@ fn vertex_edge(p: &Side, q: &Side, v: u32, e: u32) -> Step {
     }
     let vx = p.vertex(v);
     let u = h - t;
-    if let Some(k) = c.lo_plane {
-        if u.dot(&(t + u * c.lo - vx)) > p.noise * u.norm() {
-            return Step::P(Feature::Edge(planes[k].neighbor));
-        }
+    if let Some(k) = c.lo_plane
+        && u.dot(&(t + u * c.lo - vx)) > p.noise * u.norm()
+    {
+        return Step::P(Feature::Edge(planes[k].neighbor));
     }
-    if let Some(k) = c.hi_plane {
-        if u.dot(&(t + u * c.hi - vx)) < -p.noise * u.norm() {
-            return Step::P(Feature::Edge(planes[k].neighbor));
-        }
+    if let Some(k) = c.hi_plane
+        && u.dot(&(t + u * c.hi - vx)) < -p.noise * u.norm()
+    {
+        return Step::P(Feature::Edge(planes[k].neighbor));
     }
     // Also reached by a compound exclusion whose derivatives both vanish,
     // which needs E to pass through V: distance 0, a correct answer.
@@ -497,15 +505,15 @@ fn edge_against_edge_region(
             // The segment is wholly on the face's side, yet its nearest point
             // may be an end vertex of e (where the face's angle can be acute,
             // so moving into the face need not help). Vertices win.
-            if let Some(j) = vlo_k {
-                if slope(vlo) > 0.0 {
-                    return Some(edge_neighbor(j, &planes[j]));
-                }
+            if let Some(j) = vlo_k
+                && slope(vlo) > 0.0
+            {
+                return Some(edge_neighbor(j, &planes[j]));
             }
-            if let Some(j) = vhi_k {
-                if slope(vhi) < 0.0 {
-                    return Some(edge_neighbor(j, &planes[j]));
-                }
+            if let Some(j) = vhi_k
+                && slope(vhi) < 0.0
+            {
+                return Some(edge_neighbor(j, &planes[j]));
             }
             return Some(edge_neighbor(k, plane));
         }
@@ -540,15 +548,15 @@ fn edge_against_edge_region(
             pick(if slope(lo) > 0.0 { lk } else { hk })
         };
     }
-    if let Some(k) = lo_k {
-        if slope(lo) > 0.0 {
-            return Some(edge_neighbor(k, &planes[k]));
-        }
+    if let Some(k) = lo_k
+        && slope(lo) > 0.0
+    {
+        return Some(edge_neighbor(k, &planes[k]));
     }
-    if let Some(k) = hi_k {
-        if slope(hi) < 0.0 {
-            return Some(edge_neighbor(k, &planes[k]));
-        }
+    if let Some(k) = hi_k
+        && slope(hi) < 0.0
+    {
+        return Some(edge_neighbor(k, &planes[k]));
     }
     None
 }
