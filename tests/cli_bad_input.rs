@@ -241,7 +241,7 @@ fn scatter_of_a_billion_bodies_exits_2_quickly() {
 }
 
 #[test]
-#[ignore = "src bug: scatter counts are summed with a wrapping u64 add; this scene runs for minutes"]
+
 fn scatter_counts_that_overflow_exit_2_quickly() {
     // 2 x (2^63 - 1) + 10 wraps to 8 in u64, under the body limit; the first
     // scatter then tries to place 2^63 - 1 cubes in a 200 m box.

@@ -4,10 +4,11 @@
 //!
 //! Every test runs `mpirun --oversubscribe -np N rigidsim SCENE --out TMP
 //! --no-progress …` on a short run (at most 1 s simulated; the kill test
-//! stops a long one after about a second) and reads `TMP/summary.json`. CI has 2 cores, so -np 3 and 5 are oversubscribed and
-//! wall times here are no performance numbers. Runs are serialised (one
-//! `mpirun` at a time, see `one_at_a_time`): busy-polling ranks of two jobs on
-//! 2 cores would slow each other and blur the slowed rank's measured speed.
+//! stops a long one after about a second) and reads `TMP/summary.json`.
+//! CI has 2 cores, so -np 3 and 5 are oversubscribed and wall times here are
+//! no performance numbers. Runs are serialised (one `mpirun` at a time, see
+//! `one_at_a_time`): busy-polling ranks of two jobs on 2 cores would slow
+//! each other and blur the slowed rank's measured speed.
 //!
 //! A missing `mpirun` fails every test (run `scripts/setup.sh`): a cluster
 //! test that skips itself would pass on exactly the machines where the

@@ -359,7 +359,9 @@ impl ConvexPolyhedron {
                     / 6.0
             })
             .sum();
-        if volume.abs() <= VOLUME_REL_TOL * scale.powi(3) {
+        // Divided stepwise: scale³ overflows for absurd (but finite) sizes.
+        // All vertices at one point (scale 0) is flat too.
+        if scale == 0.0 || volume.abs() / scale / scale / scale <= VOLUME_REL_TOL {
             return Err(E::ZeroVolume { volume });
         }
         if volume < 0.0 {

@@ -162,7 +162,17 @@ fn read_stl(path: &Path) -> Result<Vec<RawPart>, (String, String)> {
 fn read_dxf(path: &Path) -> Result<Vec<RawPart>, (String, String)> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| (String::new(), format!("cannot read DXF: {e}")))?;
-    let lines: Vec<&str> = text.lines().map(str::trim).collect();
+    let mut lines: Vec<&str> = text.lines().map(str::trim).collect();
+    // Stop at the end-of-file marker; ignore blank lines after it or at the end.
+    if let Some(end) = lines
+        .chunks_exact(2)
+        .position(|c| c[0] == "0" && c[1] == "EOF")
+    {
+        lines.truncate(2 * end + 2);
+    }
+    while lines.last() == Some(&"") {
+        lines.pop();
+    }
     if lines.len() % 2 != 0 {
         return Err((
             String::new(),

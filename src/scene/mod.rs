@@ -187,15 +187,18 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         })
     };
 
-    let scattered: u64 = file.scatter.iter().map(|s| s.count).sum();
-    if file.bodies.len() as u64 + scattered > MAX_BODIES {
-        return Err((
-            "scatter.count".into(),
-            format!(
-                "scene asks for {} bodies, more than the limit of {MAX_BODIES}",
-                file.bodies.len() as u64 + scattered
-            ),
-        ));
+    // Saturating: counts near u64::MAX must not wrap past the limit.
+    let mut total = file.bodies.len() as u64;
+    for (i, s) in file.scatter.iter().enumerate() {
+        total = total.saturating_add(s.count);
+        if total > MAX_BODIES {
+            return Err((
+                format!("scatter[{i}].count"),
+                format!(
+                    "the scene asks for {total} or more bodies, more than the limit of {MAX_BODIES}"
+                ),
+            ));
+        }
     }
 
     let mut bodies = Vec::new();
@@ -461,7 +464,8 @@ fn build_object(
             }
         })
         .collect();
-    let polygon_count = parts.iter().map(|p| p.hull.face_count()).sum();
+    // Triangles, as the thesis counts polygons (a cube has 12).
+    let polygon_count = parts.iter().map(|p| p.hull.triangles().len()).sum();
     let thickness = parts
         .iter()
         .map(|p| min_thickness(&p.hull))
@@ -696,10 +700,18 @@ fn scatter(
         return Err((format!("{f}.max"), "must be ≥ min on every axis".into()));
     }
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(s.seed);
-    let mut placed: Vec<Vec<(Vector3<f64>, Vector3<f64>)>> = bodies
+    // Placed bodies in a uniform grid (cells of twice the largest scattered
+    // body), so each attempt tests only its neighbours: placing n bodies costs
+    // O(n), not O(n²). Bodies much larger than a cell (floors, walls) are
+    // kept in a short list tested every time.
+    let cell = ids
         .iter()
-        .map(|b| part_boxes(&objects[b.object.0 as usize], b))
-        .collect();
+        .map(|id| 2.0 * objects[id.0 as usize].outer_radius())
+        .fold(f64::MIN_POSITIVE, f64::max);
+    let mut grid = PlacementGrid::new(cell);
+    for b in bodies.iter() {
+        grid.insert(part_boxes(&objects[b.object.0 as usize], b));
+    }
     const ATTEMPTS_PER_BODY: usize = 2000;
     for n in 0..s.count as usize {
         let id = ids[n % ids.len()];
@@ -722,10 +734,10 @@ fn scatter(
                 Vector3::zeros(),
             );
             let boxes = part_boxes(object, &body);
-            if placed.iter().any(|other| boxes_overlap(&boxes, other)) {
+            if grid.overlaps(&boxes) {
                 continue;
             }
-            placed.push(boxes);
+            grid.insert(boxes);
             bodies.push(body);
             done = true;
             break;
@@ -741,6 +753,75 @@ fn scatter(
         }
     }
     Ok(())
+}
+
+type Aabb = (Vector3<f64>, Vector3<f64>);
+
+/// Uniform grid of placed bodies' part boxes (scatter only).
+struct PlacementGrid {
+    cell: f64,
+    bodies: Vec<Vec<Aabb>>,
+    cells: std::collections::HashMap<[i64; 3], Vec<usize>>,
+    large: Vec<usize>,
+}
+
+impl PlacementGrid {
+    fn new(cell: f64) -> Self {
+        PlacementGrid {
+            cell,
+            bodies: Vec::new(),
+            cells: Default::default(),
+            large: Vec::new(),
+        }
+    }
+
+    fn span(&self, boxes: &[Aabb]) -> ([i64; 3], [i64; 3]) {
+        let mut lo = Vector3::repeat(f64::INFINITY);
+        let mut hi = Vector3::repeat(f64::NEG_INFINITY);
+        for (l, h) in boxes {
+            lo = lo.inf(l);
+            hi = hi.sup(h);
+        }
+        let c = |x: f64| (x / self.cell).floor().clamp(-1e15, 1e15) as i64;
+        ([c(lo.x), c(lo.y), c(lo.z)], [c(hi.x), c(hi.y), c(hi.z)])
+    }
+
+    fn insert(&mut self, boxes: Vec<Aabb>) {
+        let (lo, hi) = self.span(&boxes);
+        let index = self.bodies.len();
+        self.bodies.push(boxes);
+        if (0..3).any(|k| hi[k] - lo[k] > 4) {
+            self.large.push(index);
+            return;
+        }
+        for x in lo[0]..=hi[0] {
+            for y in lo[1]..=hi[1] {
+                for z in lo[2]..=hi[2] {
+                    self.cells.entry([x, y, z]).or_default().push(index);
+                }
+            }
+        }
+    }
+
+    fn overlaps(&self, boxes: &[Aabb]) -> bool {
+        let hit = |i: usize| boxes_overlap(boxes, &self.bodies[i]);
+        if self.large.iter().any(|&i| hit(i)) {
+            return true;
+        }
+        let (lo, hi) = self.span(boxes);
+        for x in lo[0]..=hi[0] {
+            for y in lo[1]..=hi[1] {
+                for z in lo[2]..=hi[2] {
+                    if let Some(list) = self.cells.get(&[x, y, z]) {
+                        if list.iter().any(|&i| hit(i)) {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        false
+    }
 }
 
 /// Uniformly distributed rotation (Shoemake's method).

@@ -215,7 +215,7 @@ fn default_subdivisions() -> u32 {
     2
 }
 fn default_sides() -> u32 {
-    16
+    40
 }
 fn default_nut_across_flats() -> f64 {
     0.04
@@ -227,7 +227,7 @@ fn default_nut_hole_radius() -> f64 {
     0.011
 }
 fn default_nut_sides() -> u32 {
-    12
+    32
 }
 fn default_bolt_head_across_flats() -> f64 {
     0.03
