@@ -151,11 +151,11 @@ impl std::fmt::Display for NumericalFailure {
 }
 
 /// Contacts of one touching body pair at the current time.
-#[derive(Clone, Debug)]
-struct Touching {
-    a: BodyId,
-    b: BodyId,
-    points: Vec<ContactPoint>,
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(crate) struct Touching {
+    pub(crate) a: BodyId,
+    pub(crate) b: BodyId,
+    pub(crate) points: Vec<ContactPoint>,
 }
 
 /// The simulated world: static scene data plus the changing state.
@@ -171,11 +171,11 @@ pub struct World {
     /// Enables resting systems (on by default; analytic tests may switch it off).
     pub sleep_enabled: bool,
     pub sleep_after: f64,
-    touching: Vec<Touching>,
-    features: HashMap<(u32, u32), Vec<CachedFeatures>>,
-    sleep_timer: Vec<f64>,
+    pub(crate) touching: Vec<Touching>,
+    pub(crate) features: HashMap<(u32, u32), Vec<CachedFeatures>>,
+    pub(crate) sleep_timer: Vec<f64>,
     /// Resting system a sleeping body belongs to (its lowest body id).
-    sleep_group: Vec<u32>,
+    pub(crate) sleep_group: Vec<u32>,
     /// Total resting normal force of the last contact solve, and the force
     /// on each touching body pair (a, b, newtons), for tests and diagnostics.
     pub last_normal_force_sum: f64,
@@ -353,25 +353,6 @@ impl World {
             let Some((pair, tau)) = violation else { break };
             if events >= MAX_EVENTS_PER_STEP || last_event == Some((pair, tau)) {
                 // No progress: keep the small overlap rather than stall the step.
-                if std::env::var_os("RIGIDSIM_DEBUG").is_some() {
-                    let r = pairs.iter().position(|p| *p == pair).map(|k| {
-                        (
-                            results[k].depth,
-                            results[k].contacts.len(),
-                            results[k].penetrating,
-                        )
-                    });
-                    eprintln!(
-                        "accept t={:.3} pair {:?} tau {:e} events {} seg {:e} {:e} res {:?}",
-                        t0,
-                        pair,
-                        tau,
-                        events,
-                        seg[pair.0 as usize].time,
-                        seg[pair.1 as usize].time,
-                        r
-                    );
-                }
                 accepted.push(pair);
                 self.counters.overlaps_accepted += 1;
                 continue;

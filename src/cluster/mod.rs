@@ -68,13 +68,52 @@ pub fn slow_factor(slow: &[(i32, f64)], rank: i32) -> f64 {
         .fold(1.0, f64::max)
 }
 
+/// Keeps the CPU busy for (factor − 1)× the measured work, as a slower PC
+/// would. A sleep would not do: its granularity (tens of µs) dwarfs the
+/// microsecond batches of small scenes and would fake a much slower rank.
 fn stall(factor: f64, busy: Duration) -> Duration {
     if factor > 1.0 {
         let extra = busy.mul_f64(factor - 1.0);
-        std::thread::sleep(extra);
+        let until = Instant::now() + extra;
+        while Instant::now() < until {
+            std::hint::spin_loop();
+        }
         busy + extra
     } else {
         busy
+    }
+}
+
+/// Smoothed moments of (cost given, busy time reported) per batch, for a
+/// least-squares fit busy = overhead + cost / speed. The fixed per-batch
+/// overhead would otherwise make a rank given only small tasks look slow, get
+/// even smaller tasks, and starve.
+#[derive(Default, Clone)]
+struct SpeedMeter {
+    c: f64,
+    b: f64,
+    cc: f64,
+    cb: f64,
+}
+
+impl SpeedMeter {
+    fn add(&mut self, cost: f64, busy: f64) {
+        let s = schedule::smooth_slow;
+        self.c = s(self.c, cost);
+        self.b = s(self.b, busy);
+        self.cc = s(self.cc, cost * cost);
+        self.cb = s(self.cb, cost * busy);
+    }
+
+    /// 1 / slope of the fit, or cost / busy while the costs seen hardly vary.
+    fn speed(&self) -> f64 {
+        let var = self.cc - self.c * self.c;
+        let cov = self.cb - self.c * self.b;
+        if var > 0.01 * self.cc && cov > 0.0 {
+            var / cov
+        } else {
+            self.c / self.b
+        }
     }
 }
 
@@ -88,6 +127,20 @@ struct RankBook {
     bytes_sent: u64,
     bytes_received: u64,
 }
+
+/// Spins briefly, then yields: past the first thousand polls the coordinator
+/// stops burning a core it may share with workers on small clusters.
+fn pause(spins: u32) {
+    if spins > 1000 {
+        std::thread::sleep(Duration::from_micros(50));
+    } else {
+        std::hint::spin_loop();
+    }
+}
+
+/// A worker silent for this long is taken as lost (a stage's share is
+/// planned to take milliseconds; even a slowed PC answers within seconds).
+const REPLY_DEADLINE: Duration = Duration::from_secs(10);
 
 /// A stage is distributed only when its estimated cost exceeds this many
 /// round-trip latencies per worker (below it, messages cost more than they save).
@@ -105,9 +158,11 @@ pub struct MpiExecutor<'w> {
     /// Estimated speed per slot: slot 0 is rank 0, slot k is `roles.workers[k-1]`.
     speeds: Vec<f64>,
     book: Vec<RankBook>,
+    meters: Vec<SpeedMeter>,
     latency_s: f64,
     dist: Distribution,
     polygons: Vec<usize>,
+    parts: Vec<usize>,
     /// Distribute regardless of cost (tests of determinism and balance).
     pub force_distribute: bool,
 }
@@ -120,9 +175,11 @@ impl<'w> MpiExecutor<'w> {
             model: CostModel::default(),
             speeds: vec![1.0; slots],
             book: vec![RankBook::default(); slots],
+            meters: vec![SpeedMeter::default(); slots],
             latency_s: 0.0,
             dist: Distribution::default(),
             polygons: objects.iter().map(|o| o.polygon_count).collect(),
+            parts: objects.iter().map(|o| o.parts.len()).collect(),
             force_distribute: false,
             roles,
         };
@@ -158,12 +215,40 @@ impl<'w> MpiExecutor<'w> {
         let bytes = encode(req);
         let slot = self.slot_of(rank);
         self.book[slot].bytes_sent += bytes.len() as u64;
-        self.world
-            .process_at_rank(rank)
-            .send_with_tag(&bytes[..], protocol::TAG_REQUEST);
+        // Non-blocking, polled against the deadline: a large request waits for
+        // the receiver to post its receive, and a stopped rank never will.
+        let process = self.world.process_at_rank(rank);
+        let start = Instant::now();
+        mpi::request::scope(|scope| {
+            let mut request =
+                process.immediate_send_with_tag(scope, &bytes[..], protocol::TAG_REQUEST);
+            let mut spins = 0u32;
+            loop {
+                match request.test() {
+                    Ok(_) => break,
+                    Err(pending) => request = pending,
+                }
+                if start.elapsed() > REPLY_DEADLINE {
+                    self.lost(rank);
+                }
+                spins += 1;
+                pause(spins);
+            }
+        });
+    }
+
+    /// Ends the whole job: `rank` stopped answering.
+    fn lost(&self, rank: i32) -> ! {
+        eprintln!(
+            "rigidsim: rank 0: rank {rank} ({}) has not answered for {} s; ending the run",
+            self.roles.role_of(rank),
+            REPLY_DEADLINE.as_secs()
+        );
+        self.world.abort(5)
     }
 
     fn receive(&mut self, rank: i32) -> Reply {
+        self.await_reply(rank);
         let (bytes, _) = self
             .world
             .process_at_rank(rank)
@@ -174,6 +259,26 @@ impl<'w> MpiExecutor<'w> {
             eprintln!("rigidsim: rank 0: bad reply from rank {rank}: {e}");
             self.world.abort(4)
         })
+    }
+
+    /// Waits for `rank`'s reply without blocking inside MPI, so a rank that
+    /// stops answering (hung, stopped, or its PC frozen) ends the run with a
+    /// message naming it instead of a silent hang. A rank that dies outright
+    /// is caught by mpirun, which ends the job and names the process.
+    fn await_reply(&self, rank: i32) {
+        let start = Instant::now();
+        let process = self.world.process_at_rank(rank);
+        let mut spins = 0u32;
+        while process
+            .immediate_probe_with_tag(protocol::TAG_REPLY)
+            .is_none()
+        {
+            if start.elapsed() > REPLY_DEADLINE {
+                self.lost(rank);
+            }
+            spins += 1;
+            pause(spins);
+        }
     }
 
     fn should_distribute(&self, estimated_s: f64, tasks: usize) -> bool {
@@ -202,7 +307,7 @@ impl<'w> MpiExecutor<'w> {
         make: impl Fn(Vec<T>) -> Req,
         local: impl Fn(&[T]) -> Vec<R>,
         unpack: impl Fn(Reply) -> Option<(Vec<R>, f64)>,
-    ) -> (Vec<R>, f64, f64)
+    ) -> (Vec<R>, f64, usize)
     where
         R: Default + Clone,
     {
@@ -226,6 +331,8 @@ impl<'w> MpiExecutor<'w> {
         let own_cost: f64 = plan[0].iter().map(|&i| costs[i]).sum();
         self.book[0].busy_s += own_s;
         self.book[0].cost_s += own_cost;
+        let mut total_busy = own_s;
+        self.meter(0, own_cost, own_s);
         let mut results: Vec<R> = vec![R::default(); tasks.len()];
         for (r, &i) in own_results.into_iter().zip(&plan[0]) {
             results[i] = r;
@@ -251,17 +358,26 @@ impl<'w> MpiExecutor<'w> {
             }
             let cost: f64 = idx.iter().map(|&i| costs[i]).sum();
             self.book[k].busy_s += busy;
-            if busy > 0.0 && cost > 0.0 {
-                // Speed relative to the model calibrated on rank 0.
-                self.speeds[k] = schedule::smooth(self.speeds[k], (cost / busy).clamp(0.01, 100.0));
-            }
+            total_busy += busy;
+            self.meter(k, cost, busy);
             for (r, &i) in rs.into_iter().zip(idx) {
                 results[i] = r;
             }
         }
         let waited = wait.elapsed().as_secs_f64();
         self.book[0].waiting_s += waited;
-        (results, own_s, own_cost)
+        (results, total_busy, plan[0].len())
+    }
+
+    /// Updates a slot's speed from its batches (see `SpeedMeter`). The cost
+    /// model is calibrated on all ranks' time together, so speeds average
+    /// about 1 and a rank's share follows its speed alone.
+    fn meter(&mut self, slot: usize, cost: f64, busy: f64) {
+        if busy > 0.0 && cost > 0.0 {
+            let meter = &mut self.meters[slot];
+            meter.add(cost, busy);
+            self.speeds[slot] = meter.speed().clamp(1e-3, 1e3);
+        }
     }
 
     /// Tells workers and renderer to stop; collects their reports.
@@ -326,9 +442,13 @@ impl Executor for MpiExecutor<'_> {
         let units: Vec<f64> = tasks
             .iter()
             .map(|t| {
+                let (a, b) = (t.object_a as usize, t.object_b as usize);
                 schedule::pair_units(
-                    self.polygons[t.object_a as usize],
-                    self.polygons[t.object_b as usize],
+                    t.warm.len(),
+                    self.parts[a],
+                    self.parts[b],
+                    self.polygons[a],
+                    self.polygons[b],
                 )
             })
             .collect();
@@ -348,8 +468,7 @@ impl Executor for MpiExecutor<'_> {
             return r;
         }
         self.dist.narrowphase_distributed += 1;
-        let plan_sizes = tasks.len();
-        let (results, own_s, own_cost) = self.distribute(
+        let (results, total_busy, own_tasks) = self.distribute(
             tasks,
             &costs,
             |share| Req::Narrowphase { tasks: share },
@@ -363,11 +482,8 @@ impl Executor for MpiExecutor<'_> {
                 _ => None,
             },
         );
-        if own_cost > 0.0 {
-            self.model
-                .calibrate_pairs(own_cost / self.model.pair_coef, own_s);
-        }
-        self.book[0].tasks_np += plan_sizes as u64;
+        self.model.calibrate_pairs(units.iter().sum(), total_busy);
+        self.book[0].tasks_np += own_tasks as u64;
         results
     }
 
@@ -396,8 +512,7 @@ impl Executor for MpiExecutor<'_> {
             return r;
         }
         self.dist.solve_distributed += 1;
-        let n = tasks.len();
-        let (results, own_s, own_cost) = self.distribute(
+        let (results, total_busy, own_tasks) = self.distribute(
             tasks,
             &costs,
             |share| Req::SolveIslands { tasks: share },
@@ -407,11 +522,8 @@ impl Executor for MpiExecutor<'_> {
                 _ => None,
             },
         );
-        if own_cost > 0.0 {
-            self.model
-                .calibrate_islands(own_cost / self.model.island_coef, own_s);
-        }
-        self.book[0].tasks_is += n as u64;
+        self.model.calibrate_islands(units.iter().sum(), total_busy);
+        self.book[0].tasks_is += own_tasks as u64;
         results
     }
 }

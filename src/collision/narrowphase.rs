@@ -20,6 +20,53 @@ use serde::{Deserialize, Serialize};
 /// and small enough that a resting body does not visibly float.
 pub const CONTACT_TOLERANCE: f64 = 1e-5;
 
+/// Contact points kept per part pair. A flat 40-sided cap on a floor gives 40
+/// points, but 8 well-spread ones carry the same support polygon, and the
+/// LCP's cost grows with the cube of its rows.
+pub const MAX_POINTS_PER_PART_PAIR: usize = 8;
+
+/// Keeps at most `max` points: the deepest, then the extreme point of the
+/// patch in each of `max − 1` directions spread around the contact plane, so
+/// the support polygon (what keeps a body from tipping) is preserved.
+pub fn reduce_contacts(points: Vec<ContactPoint>, max: usize) -> Vec<ContactPoint> {
+    if points.len() <= max || max == 0 {
+        return points;
+    }
+    let n = points[0].normal;
+    let helper = if n.x.abs() < 0.6 {
+        nalgebra::Vector3::x()
+    } else {
+        nalgebra::Vector3::y()
+    };
+    let u = (helper - n * n.dot(&helper)).normalize();
+    let v = n.cross(&u);
+    let deepest = (0..points.len())
+        .min_by(|&i, &j| {
+            points[i]
+                .separation
+                .total_cmp(&points[j].separation)
+                .then(i.cmp(&j))
+        })
+        .unwrap_or(0);
+    let mut keep = vec![deepest];
+    for k in 0..max - 1 {
+        let angle = std::f64::consts::TAU * k as f64 / (max - 1) as f64;
+        let dir = u * angle.cos() + v * angle.sin();
+        let best = (0..points.len())
+            .max_by(|&i, &j| {
+                dir.dot(&points[i].point)
+                    .total_cmp(&dir.dot(&points[j].point))
+                    .then(j.cmp(&i))
+            })
+            .unwrap_or(0);
+        if !keep.contains(&best) {
+            keep.push(best);
+        }
+    }
+    keep.sort_unstable();
+    keep.into_iter().map(|i| points[i]).collect()
+}
+
 /// Closest features of one part pair, cached between frames.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CachedFeatures {
@@ -110,7 +157,7 @@ pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
                     &prox,
                     task.contact_tolerance,
                 );
-                for p in points {
+                for p in reduce_contacts(points, MAX_POINTS_PER_PART_PAIR) {
                     out.depth = out.depth.max(-p.separation);
                     out.contacts.push(p);
                 }

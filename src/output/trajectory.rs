@@ -24,6 +24,64 @@ impl TrajectoryWriter {
         })
     }
 
+    /// Continues the trajectory of a run resumed from a checkpoint taken at
+    /// `time`: keeps the header and the complete rows up to and including
+    /// `time`, drops what follows (rows a stopped run wrote after its last
+    /// checkpoint, a torn last line), and appends from there. A missing file,
+    /// or one with another header, is started afresh. Returns the writer and
+    /// the number of data rows kept (0: the caller writes the row at `time`).
+    pub fn resume(path: &Path, time: f64) -> std::io::Result<(Self, usize)> {
+        use std::io::{BufRead, BufReader, Seek, SeekFrom};
+        let Ok(file) = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(path)
+        else {
+            return Ok((Self::create(path)?, 0));
+        };
+        let mut reader = BufReader::new(&file);
+        let mut line = Vec::new();
+        reader.read_until(b'\n', &mut line)?;
+        if line != format!("{HEADER}\n").as_bytes() {
+            drop(reader);
+            return Ok((Self::create(path)?, 0));
+        }
+        let mut keep = line.len() as u64;
+        let mut rows = 0usize;
+        let mut last_time = None;
+        loop {
+            line.clear();
+            let n = reader.read_until(b'\n', &mut line)?;
+            if n == 0 || line.last() != Some(&b'\n') {
+                break;
+            }
+            let t = line
+                .split(|&c| c == b',')
+                .next()
+                .and_then(|f| std::str::from_utf8(f).ok())
+                .and_then(|f| f.parse::<f64>().ok());
+            match t {
+                Some(t) if t <= time => {
+                    keep += n as u64;
+                    rows += 1;
+                    last_time = Some(t);
+                }
+                _ => break,
+            }
+        }
+        drop(reader);
+        file.set_len(keep)?;
+        let mut file = file;
+        file.seek(SeekFrom::Start(keep))?;
+        Ok((
+            TrajectoryWriter {
+                out: BufWriter::new(file),
+                last_time,
+            },
+            rows,
+        ))
+    }
+
     /// Writes every body's row at `time` (once per time). Rows are written
     /// whole, so a run that stops leaves only complete lines after `flush`.
     pub fn sample(
@@ -52,7 +110,10 @@ impl TrajectoryWriter {
                 "{time},{i},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 p.x, p.y, p.z, q.w, q.i, q.j, q.k, v.x, v.y, v.z, w.x, w.y, w.z
             );
-            writeln!(self.out, "{line}")?;
+            // Row and newline in one write: a run stopped mid-buffer never
+            // leaves a row without its end of line.
+            line.push('\n');
+            self.out.write_all(line.as_bytes())?;
         }
         Ok(())
     }
