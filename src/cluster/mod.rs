@@ -105,14 +105,17 @@ impl SpeedMeter {
         self.cb = s(self.cb, cost * busy);
     }
 
-    /// 1 / slope of the fit, or cost / busy while the costs seen hardly vary.
+    /// 1 / slope of the fit, kept within 4× of plain cost / busy (which
+    /// overhead biases low, but noise cannot swing): a fit over microsecond
+    /// batches on shared cores can otherwise run away.
     fn speed(&self) -> f64 {
+        let ratio = self.c / self.b;
         let var = self.cc - self.c * self.c;
         let cov = self.cb - self.c * self.b;
         if var > 0.01 * self.cc && cov > 0.0 {
-            var / cov
+            (var / cov).clamp(ratio, 4.0 * ratio)
         } else {
-            self.c / self.b
+            ratio
         }
     }
 }
