@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what rigidsim needs on Debian (once): Open MPI, libclang for rsmpi's
 # bindings, Mesa's CPU Vulkan driver for off-screen rendering, ffmpeg for
-# video. Safe to run again: installs only what is missing.
+# video, fontconfig and a font for benchmark plots. Safe to run again: installs only what is missing.
 set -euo pipefail
 
 need=()
@@ -10,6 +10,10 @@ dpkg -s libopenmpi-dev >/dev/null 2>&1 || need+=(libopenmpi-dev)
 dpkg -s libclang-dev >/dev/null 2>&1 || need+=(libclang-dev)
 dpkg -s mesa-vulkan-drivers >/dev/null 2>&1 || need+=(mesa-vulkan-drivers)
 command -v ffmpeg >/dev/null 2>&1 || need+=(ffmpeg)
+# Benchmark plots (plotters' text rendering links fontconfig and needs a font).
+dpkg -s libfontconfig1-dev >/dev/null 2>&1 || need+=(libfontconfig1-dev)
+command -v pkg-config >/dev/null 2>&1 || need+=(pkg-config)
+dpkg -s fonts-dejavu-core >/dev/null 2>&1 || need+=(fonts-dejavu-core)
 
 if [ ${#need[@]} -gt 0 ]; then
   echo "setup: installing ${need[*]}" >&2

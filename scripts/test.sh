@@ -36,5 +36,11 @@ check "state_hash equal on 1, 2, 3 ranks" bash -c "[ -n \"\$(cat $tmp/det1/summa
   [ \"$(hash_of $tmp/det1 2>/dev/null)\" = \"$(hash_of $tmp/det2 2>/dev/null)\" ] && \
   [ \"$(hash_of $tmp/det1 2>/dev/null)\" = \"$(hash_of $tmp/det3 2>/dev/null)\" ]"
 
+# Every benchmark once on a tiny setting, so none can rot (timings are not checked).
+check "bench_accuracy --tiny" bash scripts/bench_accuracy.sh --tiny
+check "bench_scaling --tiny" bash scripts/bench_scaling.sh --tiny
+check "bench_peer --tiny" bash scripts/bench_peer.sh --tiny
+check "cargo bench broadphase/vclip/lcp compile and run" bash -c "cargo bench --quiet --bench broadphase -- --tiny >/dev/null"
+
 echo "scripts/test.sh: $passed passed, $fail failed"
 [ "$fail" -eq 0 ]

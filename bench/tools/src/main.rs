@@ -1,0 +1,660 @@
+//! `rigidsim-bench-report MANIFEST OUT_DIR`: reads the `summary.json` of every
+//! run listed in MANIFEST (written by `scripts/bench_scaling.sh`) and writes
+//! the tables (CSV, Markdown) and the thesis-style figures (PNG) of issue 7 §2.
+//!
+//! MANIFEST columns: `series,bodies,ranks,variant,rep,dir`, where series is
+//! `load_profile` (the 27 spheres), `rt10` (nuts and bolts, dt = 0.01 s, 10 Hz
+//! frames: the thesis's set-up), `rt60` (dt = frame = 1/60 s) or `hetero`
+//! (variant `even` / `slow`, with or without `_force`).
+//!
+//! Summaries that are missing (a run that failed or was cut off by the
+//! script's time limit) are listed and left out.
+
+#[path = "../../common/plot.rs"]
+mod plot;
+
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+struct Run {
+    series: String,
+    bodies: u64,
+    ranks: u32,
+    variant: String,
+    s: Value,
+}
+
+fn f(v: &Value, path: &[&str]) -> f64 {
+    let mut x = v;
+    for p in path {
+        x = &x[*p];
+    }
+    x.as_f64().unwrap_or(f64::NAN)
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s.sort_by(|a, b| a.total_cmp(b));
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+/// The thesis's load profile (SPEC 2.8, table 3.3), percent of compute.
+const THESIS: [(&str, f64); 3] = [
+    ("exact collision", 41.48),
+    ("contact forces (Dantzig)", 37.35),
+    ("building systems", 17.0),
+];
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() != 3 {
+        eprintln!("usage: rigidsim-bench-report MANIFEST OUT_DIR");
+        std::process::exit(2);
+    }
+    let out = PathBuf::from(&args[2]);
+    std::fs::create_dir_all(&out).expect("create OUT_DIR");
+    let manifest = std::fs::read_to_string(&args[1]).expect("read MANIFEST");
+    let mut runs = Vec::new();
+    let mut missing = Vec::new();
+    for line in manifest.lines().skip(1).filter(|l| !l.trim().is_empty()) {
+        let c: Vec<&str> = line.split(',').collect();
+        if c.len() < 6 {
+            continue;
+        }
+        let path = Path::new(c[5]).join("summary.json");
+        match std::fs::read_to_string(&path)
+            .ok()
+            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
+        {
+            Some(s) => runs.push(Run {
+                series: c[0].into(),
+                bodies: c[1].parse().unwrap_or(0),
+                ranks: c[2].parse().unwrap_or(0),
+                variant: c[3].into(),
+                s,
+            }),
+            None => missing.push(format!("{} bodies={} ranks={} {}", c[0], c[1], c[2], c[3])),
+        }
+    }
+    for m in &missing {
+        eprintln!("report: no summary for {m} (failed or cut off)");
+    }
+    let mut md = String::new();
+    load_profile(&runs, &out, &mut md);
+    scaling(&runs, &out, &mut md);
+    hetero(&runs, &out, &mut md);
+    if !missing.is_empty() {
+        let _ = writeln!(
+            md,
+            "\nRuns without a summary (failed, or cut off by the time limit): {}.",
+            missing.join("; ")
+        );
+    }
+    std::fs::write(out.join("scaling.md"), md).expect("write scaling.md");
+    eprintln!(
+        "report: {} runs read; results in {}",
+        runs.len(),
+        out.display()
+    );
+}
+
+/// Exclusive seconds per stage. `stage_seconds.time_of_impact` also contains
+/// the narrowphase, island and solve work done inside the rollback loop (and
+/// counts the rollback integration twice), so the time of impact's own share
+/// is what the wall time leaves after the exclusive stages.
+fn stages(s: &Value) -> Vec<(&'static str, f64)> {
+    let st = |k: &str| f(s, &["stage_seconds", k]);
+    let wall = f(s, &["wall_time_s"]);
+    let named = [
+        ("integrate", st("integrate")),
+        ("broadphase", st("broadphase")),
+        ("narrowphase", st("narrowphase")),
+        ("build_islands", st("build_islands")),
+        ("solve_islands", st("solve_islands")),
+    ];
+    let sum: f64 = named.iter().map(|x| x.1).sum();
+    let mut v = named.to_vec();
+    v.push(("time_of_impact (own) + other", (wall - sum).max(0.0)));
+    v
+}
+
+fn load_profile(runs: &[Run], out: &Path, md: &mut String) {
+    let lp: Vec<&Run> = runs.iter().filter(|r| r.series == "load_profile").collect();
+    if lp.is_empty() {
+        return;
+    }
+    let mut csv = String::from("run,stage,seconds,share_percent\n");
+    let mut shares: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    let mut walls = Vec::new();
+    let mut sims = Vec::new();
+    for (k, r) in lp.iter().enumerate() {
+        let wall = f(&r.s, &["wall_time_s"]);
+        walls.push(wall);
+        sims.push(f(&r.s, &["sim_time_s"]));
+        for (name, sec) in stages(&r.s) {
+            let share = 100.0 * sec / wall;
+            let _ = writeln!(csv, "{k},{name},{sec:e},{share:.3}");
+            shares.entry(name).or_default().push(share);
+        }
+    }
+    let m = |k: &str| median(shares.get(k).map_or(&[][..], |v| v.as_slice()));
+    let s0 = &lp[0].s;
+    let bisect = f(s0, &["counters", "toi_bisection_queries"]);
+    let tests = f(s0, &["counters", "pair_tests"]);
+    // The thesis's grouping: V-Clip work is the narrowphase plus the time of
+    // impact's bisection (its own V-Clip queries and re-integration).
+    let mapped = [
+        (
+            "exact collision",
+            m("narrowphase") + m("time_of_impact (own) + other"),
+        ),
+        // (the remainder also holds the loop's bookkeeping: an upper bound)
+        ("contact forces (Dantzig)", m("solve_islands")),
+        ("building systems", m("build_islands")),
+        ("spheres + integration", m("broadphase") + m("integrate")),
+    ];
+    for (name, share) in &mapped {
+        let _ = writeln!(csv, "median,{name} (thesis grouping),,{share:.3}");
+    }
+    std::fs::write(out.join("load_profile.csv"), csv).expect("write load_profile.csv");
+
+    let _ = writeln!(
+        md,
+        "## Load profile: 27 spheres, 5000 frames at 0.01 s (one rank)\n\n\
+         Median of {} run(s), wall {:.2} s (real-time factor {:.2}). `time_of_impact (own) + other` is the wall \
+         time left after the exclusive stages: the bisection's own V-Clip queries ({} of them, against {} \
+         narrowphase pair tests), the rollback re-integration and the loop's bookkeeping.\n",
+        lp.len(),
+        median(&walls),
+        median(&sims) / median(&walls),
+        bisect,
+        tests
+    );
+    md.push_str("| stage | share [%] |\n|---|---|\n");
+    for (name, _) in stages(s0) {
+        let _ = writeln!(md, "| {name} | {:.2} |", m(name));
+    }
+    md.push_str("\n| thesis grouping | thesis [%] | rigidsim [%] |\n|---|---|---|\n");
+    for (name, share) in &mapped {
+        let thesis = THESIS
+            .iter()
+            .find(|t| t.0 == *name)
+            .map_or("small".to_string(), |t| format!("{:.2}", t.1));
+        let _ = writeln!(md, "| {name} | {thesis} | {share:.2} |");
+    }
+    md.push('\n');
+
+    let cats: Vec<&str> = mapped.iter().map(|m| m.0).collect();
+    let thesis: Vec<f64> = cats
+        .iter()
+        .map(|c| THESIS.iter().find(|t| t.0 == *c).map_or(4.17, |t| t.1))
+        .collect();
+    let ours: Vec<f64> = mapped.iter().map(|m| m.1).collect();
+    if let Err(e) = bars(
+        &out.join("load_profile.png"),
+        "Load profile, 27 spheres, 5000 frames: share of compute [%]",
+        &cats,
+        &[("thesis (2002)", &thesis), ("rigidsim, one rank", &ours)],
+    ) {
+        eprintln!("report: {e}");
+    }
+}
+
+fn bars(path: &Path, title: &str, cats: &[&str], groups: &[(&str, &[f64])]) -> Result<(), String> {
+    use plotters::prelude::*;
+    let err = |e: &dyn std::fmt::Debug| format!("{}: {e:?}", path.display());
+    let root = BitMapBackend::new(path, (1000, 520)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let ymax = groups
+        .iter()
+        .flat_map(|g| g.1.iter().copied())
+        .fold(0.0, f64::max)
+        * 1.15;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(16)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..cats.len() as f64, 0.0..ymax.max(1.0))
+        .map_err(|e| err(&e))?;
+    let names: Vec<String> = cats.iter().map(|s| s.to_string()).collect();
+    let fmt = move |x: &f64| {
+        let i = (x - 0.5).round();
+        if (x - 0.5 - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
+            names[i as usize].clone()
+        } else {
+            String::new()
+        }
+    };
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(cats.len() * 2 + 1)
+        .x_label_formatter(&fmt)
+        .y_desc("share of compute [%]")
+        .draw()
+        .map_err(|e| err(&e))?;
+    let colors = [
+        RGBColor(150, 150, 150),
+        RGBColor(31, 119, 180),
+        RGBColor(214, 39, 40),
+    ];
+    let w = 0.8 / groups.len() as f64;
+    for (g, (label, values)) in groups.iter().enumerate() {
+        let color = colors[g % colors.len()];
+        chart
+            .draw_series(values.iter().enumerate().map(|(i, &v)| {
+                let x0 = i as f64 + 0.1 + g as f64 * w;
+                Rectangle::new([(x0, 0.0), (x0 + w * 0.95, v)], color.filled())
+            }))
+            .map_err(|e| err(&e))?
+            .label(*label)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled()));
+        chart
+            .draw_series(values.iter().enumerate().map(|(i, &v)| {
+                let x0 = i as f64 + 0.1 + g as f64 * w;
+                Text::new(
+                    format!("{v:.1}"),
+                    (x0 + 0.02, v + ymax * 0.02),
+                    ("sans-serif", 13),
+                )
+            }))
+            .map_err(|e| err(&e))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .position(plotters::chart::SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// Medians over the repetitions of one (series, bodies, ranks, variant).
+struct Agg {
+    bodies: u64,
+    ranks: u32,
+    variant: String,
+    runs: usize,
+    wall: f64,
+    worst: f64,
+    sim: f64,
+    interval: f64,
+    bytes_per_frame: f64,
+    np_share: f64,
+    solve_share: f64,
+    rested: usize,
+    fallen: f64,
+}
+
+fn aggregate(runs: &[&Run]) -> Vec<Agg> {
+    let mut groups: BTreeMap<(u32, u64, String), Vec<&Run>> = BTreeMap::new();
+    for r in runs {
+        groups
+            .entry((r.ranks, r.bodies, r.variant.clone()))
+            .or_default()
+            .push(r);
+    }
+    groups
+        .into_iter()
+        .map(|((ranks, bodies, variant), rs)| {
+            let col =
+                |g: &dyn Fn(&Value) -> f64| median(&rs.iter().map(|r| g(&r.s)).collect::<Vec<_>>());
+            Agg {
+                bodies,
+                ranks,
+                variant,
+                runs: rs.len(),
+                wall: col(&|s| f(s, &["wall_time_s"])),
+                worst: col(&|s| f(s, &["worst_frame_s"])),
+                sim: col(&|s| f(s, &["sim_time_s"])),
+                interval: col(&|s| f(s, &["frame_interval_s"])),
+                bytes_per_frame: col(&|s| {
+                    let c = &s["per_rank"][0];
+                    let frames = (f(s, &["sim_time_s"]) / f(s, &["frame_interval_s"])).max(1.0);
+                    (f(c, &["bytes_sent"]) + f(c, &["bytes_received"])) / frames
+                }),
+                np_share: col(&|s| {
+                    let d = f(s, &["distributed", "narrowphase_distributed"]);
+                    d / (d + f(s, &["distributed", "narrowphase_local"])).max(1.0)
+                }),
+                solve_share: col(&|s| {
+                    let d = f(s, &["distributed", "solve_distributed"]);
+                    d / (d + f(s, &["distributed", "solve_local"])).max(1.0)
+                }),
+                rested: rs.iter().filter(|r| r.s["end_reason"] == "rest").count(),
+                fallen: col(&|s| f(s, &["bodies_fallen"])),
+            }
+        })
+        .collect()
+}
+
+fn rank_label(ranks: u32, variant: &str) -> String {
+    if variant.contains("render") {
+        format!("{ranks} ranks (4 compute + render)")
+    } else if ranks == 1 {
+        "1 rank".into()
+    } else {
+        format!("{ranks} ranks")
+    }
+}
+
+/// Largest body count N such that every measured count up to N stays within
+/// the frame interval.
+fn realtime_limit(aggs: &[&Agg]) -> u64 {
+    let mut sorted: Vec<&&Agg> = aggs.iter().collect();
+    sorted.sort_by_key(|a| a.bodies);
+    let mut best = 0;
+    for a in sorted {
+        if a.worst <= a.interval {
+            best = a.bodies;
+        } else {
+            break;
+        }
+    }
+    best
+}
+
+fn scaling(runs: &[Run], out: &Path, md: &mut String) {
+    let mut csv = String::from(
+        "series,bodies,ranks,variant,runs,rested_runs,sim_time_s,wall_median_s,worst_frame_median_s,frame_interval_s,realtime_factor,bytes_per_frame,narrowphase_distributed_share,solve_distributed_share,bodies_fallen\n",
+    );
+    // Per frequency: (ranks, variant, largest real-time body count).
+    type Limits = Vec<(u32, String, u64)>;
+    let mut limits: Vec<(String, Limits)> = Vec::new();
+    for (series, hz) in [
+        ("rt10", "10 Hz, dt = 0.01 s"),
+        ("rt60", "60 Hz, dt = 1/60 s"),
+    ] {
+        let rs: Vec<&Run> = runs.iter().filter(|r| r.series == series).collect();
+        if rs.is_empty() {
+            continue;
+        }
+        let aggs = aggregate(&rs);
+        for a in &aggs {
+            let _ = writeln!(
+                csv,
+                "{series},{},{},{},{},{},{:.3},{:e},{:e},{},{:.4},{:.0},{:.4},{:.4},{}",
+                a.bodies,
+                a.ranks,
+                a.variant,
+                a.runs,
+                a.rested,
+                a.sim,
+                a.wall,
+                a.worst,
+                a.interval,
+                a.sim / a.wall,
+                a.bytes_per_frame,
+                a.np_share,
+                a.solve_share,
+                a.fallen
+            );
+        }
+        let mut keys: Vec<(u32, String)> =
+            aggs.iter().map(|a| (a.ranks, a.variant.clone())).collect();
+        keys.sort();
+        keys.dedup();
+        let by = |k: &(u32, String)| -> Vec<&Agg> {
+            aggs.iter()
+                .filter(|a| a.ranks == k.0 && a.variant == k.1)
+                .collect()
+        };
+        let interval = aggs.first().map_or(0.1, |a| a.interval);
+        let series_of = |y: &dyn Fn(&Agg) -> f64| -> Vec<plot::Series> {
+            keys.iter()
+                .map(|k| plot::Series {
+                    label: rank_label(k.0, &k.1),
+                    points: by(k).iter().map(|a| (a.bodies as f64, y(a))).collect(),
+                    thin: false,
+                })
+                .collect()
+        };
+        let panels = vec![
+            plot::Panel {
+                title: "total compute time to rest (fig. 5.1)".into(),
+                x_label: "bodies".into(),
+                y_label: "wall time [s]".into(),
+                series: series_of(&|a| a.wall),
+                ..Default::default()
+            },
+            plot::Panel {
+                title: "total compute time to rest, log-log".into(),
+                x_label: "bodies".into(),
+                y_label: "wall time [s]".into(),
+                x_log: true,
+                y_log: true,
+                series: series_of(&|a| a.wall),
+                ..Default::default()
+            },
+            plot::Panel {
+                title: format!("worst frame ({hz}; figs. 5.6-5.10)"),
+                x_label: "bodies".into(),
+                y_label: "worst frame [s]".into(),
+                x_log: true,
+                y_log: true,
+                series: series_of(&|a| a.worst),
+                hlines: vec![(
+                    interval,
+                    format!("real time: frame interval {interval:.4} s"),
+                )],
+                ..Default::default()
+            },
+            plot::Panel {
+                title: "real-time factor (simulated / wall)".into(),
+                x_label: "bodies".into(),
+                y_label: "real-time factor".into(),
+                x_log: true,
+                y_log: true,
+                series: series_of(&|a| a.sim / a.wall),
+                hlines: vec![(1.0, "real time".into())],
+                ..Default::default()
+            },
+            plot::Panel {
+                title: "share of narrowphase stages distributed".into(),
+                x_label: "bodies".into(),
+                y_label: "share distributed".into(),
+                series: series_of(&|a| a.np_share),
+                ..Default::default()
+            },
+            plot::Panel {
+                title: "bytes per frame (rank 0 sent + received)".into(),
+                x_label: "bodies".into(),
+                y_label: "bytes / frame".into(),
+                x_log: true,
+                y_log: true,
+                series: series_of(&|a| a.bytes_per_frame),
+                ..Default::default()
+            },
+        ];
+        let title = format!(
+            "Nuts and bolts onto the 2 m floor ({hz}); ranks beyond 2 share 2 cores (oversubscribed)"
+        );
+        if let Err(e) = plot::draw(
+            &out.join(format!("scaling_{series}.png")),
+            &title,
+            &panels,
+            2,
+        ) {
+            eprintln!("report: {e}");
+        }
+        let lim: Vec<(u32, String, u64)> = keys
+            .iter()
+            .map(|k| (k.0, k.1.clone(), realtime_limit(&by(k))))
+            .collect();
+        limits.push((hz.to_string(), lim));
+
+        let _ = writeln!(md, "## Scaling, nuts and bolts ({hz})\n");
+        md.push_str("| bodies | ranks | runs | rested | simulated [s] | wall [s] | worst frame [s] | real-time factor | narrowphase distributed | solve distributed | bytes/frame |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+        for k in &keys {
+            for a in by(k) {
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {} | {}/{} | {:.2} | {:.3} | {:.4} | {:.2} | {:.0} % | {:.0} % | {:.0} |",
+                    a.bodies,
+                    rank_label(a.ranks, &a.variant),
+                    a.runs,
+                    a.rested,
+                    a.runs,
+                    a.sim,
+                    a.wall,
+                    a.worst,
+                    a.sim / a.wall,
+                    100.0 * a.np_share,
+                    100.0 * a.solve_share,
+                    a.bytes_per_frame
+                );
+            }
+        }
+        md.push('\n');
+    }
+    std::fs::write(out.join("scaling.csv"), csv).expect("write scaling.csv");
+    if limits.is_empty() {
+        return;
+    }
+    md.push_str("## Largest body count that stays real time (worst frame within the frame interval for every count up to it)\n\n| ranks |");
+    for (hz, _) in &limits {
+        let _ = write!(md, " {hz} |");
+    }
+    md.push_str("\n|---|");
+    for _ in &limits {
+        md.push_str("---|");
+    }
+    md.push('\n');
+    let keys: Vec<(u32, String)> = limits[0].1.iter().map(|l| (l.0, l.1.clone())).collect();
+    for k in &keys {
+        let _ = write!(md, "| {} |", rank_label(k.0, &k.1));
+        for (_, lim) in &limits {
+            let v = lim
+                .iter()
+                .find(|l| l.0 == k.0 && l.1 == k.1)
+                .map_or("-".into(), |l| l.2.to_string());
+            let _ = write!(md, " {v} |");
+        }
+        md.push('\n');
+    }
+    md.push('\n');
+    let panel = plot::Panel {
+        title: "largest real-time body count per rank count (thesis: 9, 16, -, 21)".into(),
+        x_label: "ranks".into(),
+        y_label: "bodies".into(),
+        series: limits
+            .iter()
+            .map(|(hz, lim)| plot::Series {
+                label: hz.clone(),
+                points: lim.iter().map(|l| (l.0 as f64, l.2 as f64)).collect(),
+                thin: false,
+            })
+            .chain(std::iter::once(plot::Series {
+                label: "thesis, 10 Hz (1, 2, 4 PCs)".into(),
+                points: vec![(1.0, 9.0), (2.0, 16.0), (4.0, 21.0)],
+                thin: true,
+            }))
+            .collect(),
+        ..Default::default()
+    };
+    if let Err(e) = plot::draw(
+        &out.join("scaling_realtime_limit.png"),
+        "Real time held up to",
+        &[panel],
+        1,
+    ) {
+        eprintln!("report: {e}");
+    }
+}
+
+fn hetero(runs: &[Run], out: &Path, md: &mut String) {
+    let rs: Vec<&Run> = runs.iter().filter(|r| r.series == "hetero").collect();
+    if rs.is_empty() {
+        return;
+    }
+    let mut csv = String::from(
+        "bodies,ranks,variant,rep_wall_s,rank,role,speed_estimate,tasks,task_share,busy_s\n",
+    );
+    let mut groups: BTreeMap<(u64, String), Vec<&Run>> = BTreeMap::new();
+    for r in &rs {
+        groups
+            .entry((r.bodies, r.variant.clone()))
+            .or_default()
+            .push(r);
+    }
+    md.push_str("## Heterogeneous ranks: one worker slowed (`--slow-rank 2=3.0`), 3 ranks (coordinator + 2 workers)\n\n");
+    md.push_str("| bodies | variant | runs | wall [s] | worst frame [s] | speed estimate rank 1 | speed estimate rank 2 | tasks rank 0 / 1 / 2 |\n|---|---|---|---|---|---|---|---|\n");
+    let mut speed_pts: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    for ((bodies, variant), rs) in &groups {
+        for r in rs {
+            let total: f64 = r.s["per_rank"]
+                .as_array()
+                .map_or(0.0, |a| a.iter().map(|p| f(p, &["tasks"])).sum());
+            for p in r.s["per_rank"].as_array().into_iter().flatten() {
+                let _ = writeln!(
+                    csv,
+                    "{bodies},{},{variant},{:e},{},{},{:.4},{},{:.4},{:e}",
+                    r.ranks,
+                    f(&r.s, &["wall_time_s"]),
+                    p["rank"],
+                    p["role"].as_str().unwrap_or(""),
+                    f(p, &["speed"]),
+                    p["tasks"],
+                    f(p, &["tasks"]) / total.max(1.0),
+                    f(p, &["busy_s"])
+                );
+            }
+        }
+        let m = |g: &dyn Fn(&Value) -> f64| median(&rs.iter().map(|r| g(&r.s)).collect::<Vec<_>>());
+        let speed = |k: usize| m(&|s| f(&s["per_rank"][k], &["speed"]));
+        let tasks = |k: usize| m(&|s| f(&s["per_rank"][k], &["tasks"]));
+        let _ = writeln!(
+            md,
+            "| {bodies} | {variant} | {} | {:.3} | {:.4} | {:.3} | {:.3} | {:.0} / {:.0} / {:.0} |",
+            rs.len(),
+            m(&|s| f(s, &["wall_time_s"])),
+            m(&|s| f(s, &["worst_frame_s"])),
+            speed(1),
+            speed(2),
+            tasks(0),
+            tasks(1),
+            tasks(2)
+        );
+        speed_pts
+            .entry(format!("{variant}: rank 2 / rank 1 speed"))
+            .or_default()
+            .push((*bodies as f64, speed(2) / speed(1)));
+        speed_pts
+            .entry(format!("{variant}: rank 2 / rank 1 tasks"))
+            .or_default()
+            .push((*bodies as f64, tasks(2) / tasks(1).max(1.0)));
+    }
+    md.push('\n');
+    std::fs::write(out.join("hetero.csv"), csv).expect("write hetero.csv");
+    let panel = plot::Panel {
+        title: "rank 2 slowed 3x: what the speed estimate recovers (ideal speed ratio 1/3)".into(),
+        x_label: "bodies".into(),
+        y_label: "ratio rank 2 / rank 1".into(),
+        series: speed_pts
+            .into_iter()
+            .map(|(label, points)| plot::Series {
+                label,
+                points,
+                thin: false,
+            })
+            .collect(),
+        hlines: vec![(1.0 / 3.0, "1/3".into()), (1.0, "1".into())],
+        ..Default::default()
+    };
+    if let Err(e) = plot::draw(&out.join("hetero.png"), "Heterogeneous ranks", &[panel], 1) {
+        eprintln!("report: {e}");
+    }
+}
