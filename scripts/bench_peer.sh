@@ -17,5 +17,5 @@ for a in "$@"; do args+=("$a"); done
 if [ "${TINY:-0}" = 1 ]; then args+=(--tiny); fi
 export BENCH_MACHINE=${BENCH_MACHINE:-$(hostname)-$(nproc)cpu}
 # The root target folder is shared: crates common to both builds compile once.
-cargo build --release --quiet --manifest-path bench/peer/Cargo.toml --target-dir target
-target/release/rigidsim-peer "${args[@]}"
+cargo build --release --quiet --manifest-path bench/peer/Cargo.toml --target-dir "${CARGO_TARGET_DIR:-target}"
+"${CARGO_TARGET_DIR:-target}"/release/rigidsim-peer "${args[@]}"

@@ -42,12 +42,12 @@ fi
 RUN_LIMIT=${RUN_LIMIT:-300}
 
 cargo build --release --quiet
-cargo build --release --quiet --manifest-path bench/tools/Cargo.toml --target-dir target
+cargo build --release --quiet --manifest-path bench/tools/Cargo.toml --target-dir "${CARGO_TARGET_DIR:-target}"
 mkdir -p "$out"
 tmp=$(mktemp -d)
 if [ "${KEEP_RUNS:-0}" = 1 ]; then echo "bench_scaling: runs kept in $tmp"; else trap 'rm -rf "$tmp"' EXIT; fi
 # A private copy: a rebuild of target/ during the runs must not mix versions.
-cp target/release/rigidsim "$tmp/rigidsim"
+cp "${CARGO_TARGET_DIR:-target}"/release/rigidsim "$tmp/rigidsim"
 bin=$tmp/rigidsim
 manifest=$tmp/manifest.csv
 echo "series,bodies,ranks,variant,rep,dir" >"$manifest"
@@ -123,7 +123,7 @@ for rep in $(seq 1 "$REPS"); do
   done
 done
 
-target/release/rigidsim-bench-report "$manifest" "$out"
+"${CARGO_TARGET_DIR:-target}"/release/rigidsim-bench-report "$manifest" "$out"
 {
   echo "machine: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores"
   echo "mpirun: $(mpirun --version 2>/dev/null | head -1)"

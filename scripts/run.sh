@@ -11,4 +11,4 @@ shift || true
 cargo build --release --quiet
 ranks="${RANKS:-3}"
 exec mpirun -np "$ranks" --oversubscribe ${HOSTFILE:+--hostfile "$HOSTFILE"} \
-  target/release/rigidsim "$scene" "$@"
+  "${CARGO_TARGET_DIR:-target}"/release/rigidsim "$scene" "$@"

@@ -9,7 +9,7 @@ source scripts/setup.sh
 cargo build --release --quiet
 cargo test --release --no-fail-fast -- --test-threads=2
 
-bin=target/release/rigidsim
+bin="${CARGO_TARGET_DIR:-target}"/release/rigidsim
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 fail=0
