@@ -18,8 +18,16 @@ fn scene(bodies: u32) -> Vec<SphereProxy> {
             let c = Vector3::from_fn(|_, _| rng.random::<f64>() * side);
             // Two spheres per body, like a bolt's head and shaft.
             [
-                SphereProxy { body, center: c, radius: 0.02 },
-                SphereProxy { body, center: c + Vector3::new(0.0, 0.0, 0.025), radius: 0.015 },
+                SphereProxy {
+                    body,
+                    center: c,
+                    radius: 0.02,
+                },
+                SphereProxy {
+                    body,
+                    center: c + Vector3::new(0.0, 0.0, 0.025),
+                    radius: 0.015,
+                },
             ]
         })
         .collect()
@@ -43,12 +51,17 @@ fn main() {
     let tiny = std::env::args().any(|a| a == "--tiny");
     let sizes: &[u32] = if tiny { &[100] } else { &[100, 1_000, 10_000] };
     let runs = if tiny { 1 } else { 11 };
-    println!("{:>8} {:>8} {:>14} {:>16} {:>8}", "bodies", "pairs", "sweep (ms)", "all pairs (ms)", "ratio");
+    println!(
+        "{:>8} {:>8} {:>14} {:>16} {:>8}",
+        "bodies", "pairs", "sweep (ms)", "all pairs (ms)", "ratio"
+    );
     for &n in sizes {
         let proxies = scene(n);
         let (sweep, pairs) = time(runs, || candidate_pairs(&proxies, |_, _| true).len());
         let brute_runs = if n > 2_000 { 1 } else { runs };
-        let (brute, brute_pairs) = time(brute_runs, || candidate_pairs_brute_force(&proxies, |_, _| true).len());
+        let (brute, brute_pairs) = time(brute_runs, || {
+            candidate_pairs_brute_force(&proxies, |_, _| true).len()
+        });
         assert_eq!(pairs, brute_pairs);
         println!(
             "{:>8} {:>8} {:>14.3} {:>16.3} {:>7.1}x",

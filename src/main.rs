@@ -1,11 +1,14 @@
 //! `rigidsim SCENE.toml [options]`, alone or under `mpirun -np N`.
 //!
-//! Exit status: 0 done, 2 bad input (scene, mesh, options), 3 the run went
-//! numerically wrong (outputs written so far are kept), 1 anything else.
+//! Exit status: 0 done, 2 bad input (scene, mesh, options, a refused
+//! `--resume` checkpoint), 3 the run went numerically wrong (outputs written
+//! so far and the last checkpoint are kept), 1 anything else.
 
 use clap::Parser;
 use mpi::topology::Communicator;
+use mpi::traits::Root;
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
+use rigidsim::output::checkpoint::Checkpoint;
 use rigidsim::run::{self, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunError, RunOptions};
 use rigidsim::step::{Executor, Inline};
 use std::path::PathBuf;
@@ -43,6 +46,14 @@ struct Cli {
     /// Distribute every stage whatever its size (tests of determinism and balance).
     #[arg(long)]
     force_distribute: bool,
+    /// Write the full simulation state to OUT/checkpoint.bin every S
+    /// simulated seconds and at the end (atomically: a crash keeps the last one).
+    #[arg(long, value_name = "S")]
+    checkpoint_every: Option<f64>,
+    /// Continue from a checkpoint (same scene file and --dt; any rank count).
+    /// The trajectory in the output folder, if any, continues from its time.
+    #[arg(long, value_name = "FILE")]
+    resume: Option<PathBuf>,
 }
 
 fn parse_slow(s: &str) -> Result<(i32, f64), String> {
@@ -89,6 +100,7 @@ fn main() -> ExitCode {
         no_render: cli.no_render,
         no_progress: cli.no_progress,
         no_sleep: cli.no_sleep,
+        checkpoint_every: cli.checkpoint_every,
     };
     let mut scene = match rigidsim::scene::load(&cli.scene) {
         Ok(s) => s,
@@ -100,6 +112,27 @@ fn main() -> ExitCode {
     if let Err(e) = run::apply_overrides(&mut scene, &opts) {
         say(&format!("error: {e}"));
         return ExitCode::from(2);
+    }
+    // `--resume`: rank 0 reads the checkpoint and checks it against the scene,
+    // then tells every rank whether to go on, so that a refused checkpoint
+    // ends all ranks alike (exit 2) before any work is handed out. Only rank 0
+    // needs the file.
+    let mut resume = None;
+    if let Some(path) = &cli.resume {
+        let mut code: i32 = 0;
+        if rank == 0 {
+            match Checkpoint::read_for(path, &scene, !opts.no_sleep) {
+                Ok(ck) => resume = Some(ck),
+                Err(e) => {
+                    say(&format!("error: {e}"));
+                    code = 2;
+                }
+            }
+        }
+        world.process_at_rank(0).broadcast_into(&mut code);
+        if code != 0 {
+            return ExitCode::from(code as u8);
+        }
     }
     let out_dir = opts
         .out_dir
@@ -151,7 +184,7 @@ fn main() -> ExitCode {
             }
         }
     };
-    match run::run_coordinator(scene, &opts, &out_dir, exec, frames) {
+    match run::run_coordinator(scene, &opts, &out_dir, exec, frames, resume) {
         Ok(summary) => {
             eprintln!(
                 "rigidsim: {} bodies, {:.3} s simulated in {:.3} s ({:.2}x real time), ended by {}; results in {}",

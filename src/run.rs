@@ -3,6 +3,7 @@
 //! for the renderer, and the summary.
 
 use crate::body::{Activity, BodyKind};
+use crate::output::checkpoint::{self, Checkpoint, RunMarks};
 use crate::output::progress::Progress;
 use crate::output::summary::{RankSummary, Summary};
 use crate::output::trajectory::TrajectoryWriter;
@@ -24,6 +25,8 @@ pub struct RunOptions {
     pub no_render: bool,
     pub no_progress: bool,
     pub no_sleep: bool,
+    /// Write `checkpoint.bin` every this many simulated seconds (and at the end).
+    pub checkpoint_every: Option<f64>,
 }
 
 /// Applies command-line overrides to a loaded scene.
@@ -45,6 +48,11 @@ pub fn apply_overrides(scene: &mut Scene, opts: &RunOptions) -> Result<(), Strin
             return Err(format!("--sample-every must be positive (got {s})"));
         }
         scene.settings.sample_every = Some(s);
+    }
+    if let Some(c) = opts.checkpoint_every {
+        if !c.is_finite() || c <= 0.0 {
+            return Err(format!("--checkpoint-every must be positive (got {c})"));
+        }
     }
     if opts.no_render {
         scene.settings.render = None;
@@ -291,13 +299,17 @@ pub enum RunError {
     Failed(String),
 }
 
-/// Runs the frame loop on the coordinator and writes every output.
+/// Runs the frame loop on the coordinator and writes every output. With
+/// `resume`, the run continues from that checkpoint (already checked against
+/// the scene by `Checkpoint::read_for`) and the trajectory in `out_dir`, if
+/// any, is continued from the checkpoint's time.
 pub fn run_coordinator(
     scene: Scene,
     opts: &RunOptions,
     out_dir: &Path,
     exec: &mut dyn Executor,
     frames: &mut dyn FrameSink,
+    resume: Option<Checkpoint>,
 ) -> Result<Summary, RunError> {
     let io = |e: std::io::Error, what: &str| RunError::Io(format!("{what}: {e}"));
     std::fs::create_dir_all(out_dir)
@@ -305,12 +317,38 @@ pub fn run_coordinator(
     // A summary left by an earlier run would make this folder look complete.
     let summary_path = out_dir.join("summary.json");
     let _ = std::fs::remove_file(&summary_path);
-    let mut traj = TrajectoryWriter::create(&out_dir.join("trajectory.csv"))
-        .map_err(|e| io(e, "trajectory.csv"))?;
+    let traj_path = out_dir.join("trajectory.csv");
+    let mut notes = Vec::new();
 
     let settings = scene.settings.clone();
-    let mut world = World::new(scene);
-    world.sleep_enabled = !opts.no_sleep;
+    // The last good checkpoint: the one resumed from, then each one written.
+    let mut last_good: Option<(PathBuf, f64)> = None;
+    let (mut world, marks, mut traj, traj_rows) = match resume {
+        None => {
+            let mut world = World::new(scene);
+            world.sleep_enabled = !opts.no_sleep;
+            let traj = TrajectoryWriter::create(&traj_path).map_err(|e| io(e, "trajectory.csv"))?;
+            (world, None, traj, 0)
+        }
+        Some(ck) => {
+            let marks = ck.run.clone();
+            let time = ck.time();
+            notes.push(format!(
+                "resumed from {} at t = {time} s (step {})",
+                ck.source().display(),
+                ck.steps
+            ));
+            last_good = Some((ck.source().to_path_buf(), time));
+            let world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
+            let (traj, rows) =
+                TrajectoryWriter::resume(&traj_path, time).map_err(|e| io(e, "trajectory.csv"))?;
+            (world, Some(marks), traj, rows)
+        }
+    };
+    let checkpoint_path = out_dir.join(checkpoint::FILE_NAME);
+    let checkpoint_stride = opts
+        .checkpoint_every
+        .map(|c| ((c / settings.dt).round() as u64).max(1));
     let dt = settings.dt;
     let end_time = settings.end_time();
     let total_steps = (end_time / dt - 1e-9).ceil().max(0.0) as u64;
@@ -322,20 +360,41 @@ pub fn run_coordinator(
         .as_ref()
         .map(|r| ((r.every / dt).round() as u64).max(1));
 
-    let energy_initial = world.energy();
+    let energy_initial = marks
+        .as_ref()
+        .map_or_else(|| world.energy(), |m| m.energy_initial);
     let mut progress = Progress::new(!opts.no_progress, end_time, &world.scene.name);
     let started = Instant::now();
     let mut frame_started = Instant::now();
     let mut worst_frame: f64 = 0.0;
-    let mut frame_index = 0u64;
-    traj.sample(0.0, &world.bodies, &world.scene.objects)
-        .map_err(|e| io(e, "trajectory.csv"))?;
-    if render_stride.is_some() {
+    let mut frame_index = marks.as_ref().map_or(0, |m| m.frame_index);
+    // A fresh run samples t = 0; a resumed one continues the trajectory it
+    // finds (which already holds the rows up to the checkpoint) or, in a new
+    // folder, starts it at the checkpoint's time.
+    if marks.is_none() || traj_rows == 0 {
+        traj.sample(world.time(), &world.bodies, &world.scene.objects)
+            .map_err(|e| io(e, "trajectory.csv"))?;
+    }
+    if render_stride.is_some() && marks.is_none() {
         let clock = Instant::now();
         frames.publish(frame_of(&world, frame_index));
         frame_index += 1;
         world.stage.render += clock.elapsed().as_secs_f64();
     }
+    // Writes the world as it stands; the trajectory is flushed first so the
+    // file holds every row up to the checkpoint's time.
+    let write_checkpoint =
+        |world: &World, frame_index: u64, traj: &mut TrajectoryWriter| -> Result<_, RunError> {
+            traj.flush().map_err(|e| io(e, "trajectory.csv"))?;
+            let mut ck = world.checkpoint();
+            ck.run = RunMarks {
+                energy_initial,
+                frame_index,
+            };
+            ck.write(&checkpoint_path)
+                .map_err(|e| io(e, &checkpoint_path.display().to_string()))?;
+            Ok(Some((checkpoint_path.clone(), world.time())))
+        };
 
     let mut end_reason = "duration";
     let mut failure = None;
@@ -361,6 +420,9 @@ pub fn run_coordinator(
                 world.stage.render += clock.elapsed().as_secs_f64();
             }
         }
+        if checkpoint_stride.is_some_and(|k| s % k == 0) {
+            last_good = write_checkpoint(&world, frame_index, &mut traj)?;
+        }
         if s % frame_stride == 0 {
             worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
             frame_started = Instant::now();
@@ -380,18 +442,39 @@ pub fn run_coordinator(
         worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
     }
     progress.finish();
-    // The end row (if the last step was not a sample).
-    traj.sample(world.time(), &world.bodies, &world.scene.objects)
-        .map_err(|e| io(e, "trajectory.csv"))?;
+    if failure.is_none() {
+        // The end row (if the last step was not a sample). After a failure
+        // the state is the broken one: the trajectory ends at the last good
+        // sample, and the last checkpoint written stays as it is.
+        traj.sample(world.time(), &world.bodies, &world.scene.objects)
+            .map_err(|e| io(e, "trajectory.csv"))?;
+        let written_now = last_good
+            .as_ref()
+            .is_some_and(|(p, t)| *p == checkpoint_path && *t == world.time());
+        if checkpoint_stride.is_some() && !written_now {
+            last_good = write_checkpoint(&world, frame_index, &mut traj)?;
+        }
+    }
     traj.flush().map_err(|e| io(e, "trajectory.csv"))?;
+    let failure = failure.map(|f| match &last_good {
+        Some((p, t)) => format!("{f}; last good checkpoint: {} (t = {t} s)", p.display()),
+        None if checkpoint_stride.is_some() => format!("{f}; no checkpoint was written before it"),
+        None => f,
+    });
+    if let Some((p, t)) = &last_good {
+        if checkpoint_stride.is_some() {
+            notes.push(format!("last checkpoint: {} (t = {t} s)", p.display()));
+        }
+    }
     // Simulation time ends here; waiting for the renderer to drain is render time.
     let wall = started.elapsed().as_secs_f64();
     let clock = Instant::now();
-    let (frames_rendered, frames_dropped, adapter, mut notes) = if render_stride.is_some() {
+    let (frames_rendered, frames_dropped, adapter, frame_notes) = if render_stride.is_some() {
         frames.finish(frame_of(&world, frame_index))
     } else {
         (0, 0, None, Vec::new())
     };
+    notes.extend(frame_notes);
     world.stage.render += clock.elapsed().as_secs_f64();
     let (mut per_rank, distributed) = exec.finish();
     per_rank.extend(frames.rank_summary());

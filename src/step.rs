@@ -629,7 +629,7 @@ impl World {
         let mut prev = start;
         for s in 1..=samples {
             let t = start + (h - start) * s as f64 / samples as f64;
-            let r = self.query_at(a, b, seg, t, carried);
+            let r = self.query_at(a, b, seg, t);
             if overlaps_more(&r, carried) {
                 return Some((prev, t));
             }
@@ -638,26 +638,14 @@ impl World {
         None
     }
 
-    /// The pair at time `t`. With no overlap carried into the segment, any
-    /// overlap means "after the impact", so V-Clip alone answers (no contact
-    /// points); otherwise the overlap depth is needed and contacts are built.
-    fn query_at(
-        &mut self,
-        a: usize,
-        b: usize,
-        seg: &[Segment],
-        t: f64,
-        carried: f64,
-    ) -> PairResult {
+    /// The pair at time `t`, with contact points (their depth tells an
+    /// overlap carried into the segment from a new one).
+    fn query_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> PairResult {
         let sa = self.integrate_segment(a, &seg[a], t - seg[a].time);
         let sb = self.integrate_segment(b, &seg[b], t - seg[b].time);
         self.counters.toi_bisection_queries += 1;
         let task = self.pair_task(a as u32, b as u32, &sa, &sb);
-        if carried > 0.0 {
-            narrowphase::query_pair(&self.scene.objects, &task)
-        } else {
-            narrowphase::probe_pair(&self.scene.objects, &task)
-        }
+        narrowphase::query_pair(&self.scene.objects, &task)
     }
 
     /// Bisection for the touching instant (SPEC 2.6, fig. 3.16): `lo` is known
@@ -687,7 +675,7 @@ impl World {
                 break;
             }
             let mid = 0.5 * (lo + hi);
-            let r = self.query_at(a, b, seg, mid, carried);
+            let r = self.query_at(a, b, seg, mid);
             if overlaps_more(&r, carried) || (r.penetrating && r.depth > carried + TOI_GAP) {
                 hi = mid;
             } else {

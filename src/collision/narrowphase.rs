@@ -113,19 +113,6 @@ impl PairResult {
 
 /// Runs V-Clip on the part pairs of one body pair.
 pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
-    query(objects, task, true)
-}
-
-/// Only whether (and how far) the pair is apart: V-Clip on the part pairs,
-/// no contact points. An overlap is reported with `depth = ∞` (unknown) and no
-/// contacts. Time-of-impact bisection needs no more than this, and contact
-/// points of an overlapping pair (a separating-axis search over edge pairs)
-/// are by far the dearest part of a query.
-pub fn probe_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
-    query(objects, task, false)
-}
-
-fn query(objects: &[ObjectDef], task: &PairTask, with_contacts: bool) -> PairResult {
     let oa = &objects[task.object_a as usize];
     let ob = &objects[task.object_b as usize];
     let mut out = PairResult {
@@ -161,12 +148,6 @@ fn query(objects: &[ObjectDef], task: &PairTask, with_contacts: bool) -> PairRes
                 prox.distance
             });
             out.penetrating |= prox.penetrating;
-            if !with_contacts {
-                if prox.penetrating {
-                    out.depth = f64::INFINITY;
-                }
-                continue;
-            }
             if prox.penetrating || prox.distance <= task.contact_tolerance {
                 let points = manifold::contact_points(
                     &pa.hull,

@@ -1,7 +1,9 @@
 //! What a run leaves behind in its output folder: `trajectory.csv`,
-//! `summary.json`, and (rendering) `frames/`, `video.mp4`, `preview.png`.
+//! `summary.json`, `checkpoint.bin` (with `--checkpoint-every`), and
+//! (rendering) `frames/`, `video.mp4`, `preview.png`.
 //! Names, columns and fields here are a contract with other tools.
 
+pub mod checkpoint;
 pub mod progress;
 pub mod summary;
 pub mod trajectory;
