@@ -481,7 +481,7 @@ pub fn run_coordinator(
     world.stage.communication = per_rank.first().map_or(0.0, |r| r.waiting_s);
     for (size, e) in world.counters.solve.failures.iter().take(5) {
         notes.push(format!(
-            "LCP solve of {size} rows failed ({e}); used projected Gauss-Seidel"
+            "LCP solve of {size} rows failed or was rejected ({e}); a fallback solve was used"
         ));
     }
 

@@ -1251,7 +1251,6 @@ fn light_spinning_hulls_use_up_the_event_budget_and_overlap() {
 /// events, one overlap accepted) the energy rises by 2.35 MJ, body 12 (a
 /// 94.8 kg hull) leaving at about 220 m/s.
 #[test]
-#[ignore = "bug: one step adds 2.35 MJ (body 12, a 94.8 kg hull, t = 0.45 s); since 6fdb978"]
 fn heavy_hull_gains_2_mj_in_one_step() {
     let (_, watch, scale) = replay("stress_energy_explosion");
     assert!(
@@ -1264,7 +1263,6 @@ fn heavy_hull_gains_2_mj_in_one_step() {
 
 /// Four random bodies: before 6fdb978 the step that ends at t = 0.13 s
 /// added 88 kJ (a 12.5 kg pentagonal prism left at about 118 m/s).
-#[ignore = "bug: one step adds 88 kJ to a 12.5 kg prism at t = 0.13 s (seen with full-query bisection; the V-Clip-only bisection hid it but broke overlaps)"]
 #[test]
 fn pentagonal_prism_does_not_gain_86_kj_at_0_13_s() {
     let (_, watch, scale) = replay("stress_prism_explosion_before_6fdb978");
