@@ -566,35 +566,47 @@ impl World {
             if accepted.contains(k) {
                 continue;
             }
-            if let Some(&cached) = cache.get(k) {
-                if let Some(tau) = cached {
-                    if best.is_none_or(|(bk, bt)| tau < bt || (tau == bt && *k < bk)) {
-                        best = Some((*k, tau));
-                    }
+            let tau = match cache.get(k) {
+                Some(&cached) => cached,
+                None => {
+                    let tau = self.time_of_impact(*k, r, seg, h, base);
+                    cache.insert(*k, tau);
+                    tau
                 }
-                continue;
-            }
-            let (a, b) = (k.0 as usize, k.1 as usize);
-            let start = seg[a].time.max(seg[b].time);
-            let carried = base.get(k).copied().unwrap_or(0.0);
-            let interval = if overlaps_more(r, carried) {
-                Some(
-                    self.first_overlap_sample(a, b, seg, start, h, carried)
-                        .unwrap_or((start, h)),
-                )
-            } else {
-                // No overlap at the end: a fast pair may still have crossed.
-                self.first_overlap_sample(a, b, seg, start, h, carried)
             };
-            let tau = interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi, carried));
-            cache.insert(*k, tau);
             if let Some(tau) = tau {
+                // Earliest first; ties by pair, so the order never depends on iteration.
                 if best.is_none_or(|(bk, bt)| tau < bt || (tau == bt && *k < bk)) {
                     best = Some((*k, tau));
                 }
             }
         }
         best
+    }
+
+    /// Time of impact of one pair in this step, if it overlaps (or a fast
+    /// pair crossed) beyond what it carried into its segment.
+    fn time_of_impact(
+        &mut self,
+        k: (u32, u32),
+        r: &PairResult,
+        seg: &[Segment],
+        h: f64,
+        base: &HashMap<(u32, u32), f64>,
+    ) -> Option<f64> {
+        let (a, b) = (k.0 as usize, k.1 as usize);
+        let start = seg[a].time.max(seg[b].time);
+        let carried = base.get(&k).copied().unwrap_or(0.0);
+        let interval = if overlaps_more(r, carried) {
+            Some(
+                self.first_overlap_sample(a, b, seg, start, h, carried)
+                    .unwrap_or((start, h)),
+            )
+        } else {
+            // No overlap at the end: a fast pair may still have crossed.
+            self.first_overlap_sample(a, b, seg, start, h, carried)
+        };
+        interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi, carried))
     }
 
     /// For pairs that move by more than their thickness during the step,

@@ -6,9 +6,6 @@
 //! over the time it reported busy, smoothed, so a PC that another user starts
 //! loading gets less work from the next frame on.
 
-/// Exponential smoothing weight of a new measurement.
-const SMOOTHING: f64 = 0.3;
-
 #[derive(Clone, Debug)]
 pub struct CostModel {
     /// Seconds per pair unit (see `pair_units`).
@@ -92,10 +89,6 @@ fn calibrate(sums: &mut (f64, f64), units: f64, seconds: f64) -> Option<f64> {
     sums.0 = smooth_slow(sums.0, units);
     sums.1 = smooth_slow(sums.1, seconds);
     Some(sums.1 / sums.0)
-}
-
-pub fn smooth(old: f64, new: f64) -> f64 {
-    (1.0 - SMOOTHING) * old + SMOOTHING * new
 }
 
 /// Slower smoothing for speed meters (about the last 20 batches), so one

@@ -417,21 +417,7 @@ fn energy_guard(
         m as u32,
         format!("solution added {:.3e} J of kinetic energy", gain(&p)),
     ));
-    let normal: Vec<usize> = (0..m).filter(|&i| findex[i].is_none()).collect();
-    let k = normal.len();
-    let mut an = vec![0.0; k * k];
-    for (r, &i) in normal.iter().enumerate() {
-        for (c, &j) in normal.iter().enumerate() {
-            an[r * k + c] = a[i * m + j];
-        }
-    }
-    let bn: Vec<f64> = normal.iter().map(|&i| vel[i]).collect();
-    let mut safe = vec![0.0; m];
-    if let Ok(sol) = lcp::solve_standard(&an, &bn) {
-        for (r, &i) in normal.iter().enumerate() {
-            safe[i] = sol.x[r];
-        }
-    }
+    let safe = solve_normal_rows(a, m, &vel, findex).unwrap_or_else(|| vec![0.0; m]);
     if gain(&safe) > ENERGY_GAIN_ALLOWED * scale + 1e-12 {
         // Even the safe solve failed numerically: apply nothing this step.
         return vec![0.0; m];
@@ -489,22 +475,9 @@ fn fallback(
     hi: &[f64],
     findex: &[Option<usize>],
 ) -> Vec<f64> {
-    let normal: Vec<usize> = (0..m).filter(|&i| findex[i].is_none()).collect();
-    let k = normal.len();
-    let mut an = vec![0.0; k * k];
-    for (r, &i) in normal.iter().enumerate() {
-        for (c, &j) in normal.iter().enumerate() {
-            an[r * k + c] = a[i * m + j];
-        }
-    }
-    let bn: Vec<f64> = normal.iter().map(|&i| b[i]).collect();
-    let Ok(sol) = lcp::solve_standard(&an, &bn) else {
+    let Some(pn) = solve_normal_rows(a, m, b, findex) else {
         return projected_gauss_seidel(a, m, b, lo, hi, findex);
     };
-    let mut pn = vec![0.0; m];
-    for (r, &i) in normal.iter().enumerate() {
-        pn[i] = sol.x[r];
-    }
     let (mut flo, mut fhi) = (lo.to_vec(), hi.to_vec());
     for i in 0..m {
         if let Some(j) = findex[i] {
@@ -516,6 +489,26 @@ fn fallback(
         Ok(full) => full.x,
         Err(_) => pn,
     }
+}
+
+/// The standard LCP on the normal rows alone (friction rows left at zero),
+/// as a full-length impulse vector; `None` when the solver fails.
+fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -> Option<Vec<f64>> {
+    let normal: Vec<usize> = (0..m).filter(|&i| findex[i].is_none()).collect();
+    let k = normal.len();
+    let mut an = vec![0.0; k * k];
+    for (r, &i) in normal.iter().enumerate() {
+        for (c, &j) in normal.iter().enumerate() {
+            an[r * k + c] = a[i * m + j];
+        }
+    }
+    let bn: Vec<f64> = normal.iter().map(|&i| b[i]).collect();
+    let sol = lcp::solve_standard(&an, &bn).ok()?;
+    let mut p = vec![0.0; m];
+    for (r, &i) in normal.iter().enumerate() {
+        p[i] = sol.x[r];
+    }
+    Some(p)
 }
 
 /// Last-resort fallback: projected Gauss–Seidel on the boxed LCP.

@@ -836,14 +836,3 @@ fn random_rotation(rng: &mut impl rand::Rng) -> UnitQuaternion<f64> {
     );
     UnitQuaternion::from_quaternion(q)
 }
-
-/// The initial state as bodies, for convenience in tests.
-pub fn body_ids(scene: &Scene) -> impl Iterator<Item = BodyId> + '_ {
-    (0..scene.bodies.len()).map(|i| BodyId(i as u32))
-}
-
-impl Activity {
-    pub fn is_awake(self) -> bool {
-        matches!(self, Activity::Awake)
-    }
-}
