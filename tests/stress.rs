@@ -586,8 +586,9 @@ fn crossed_edges_land_and_balance_on_the_point_they_cross() {
 /// Parallel edges: a segment of contact along the ridge. At 6fdb978 the
 /// cube balances on it (as by symmetry it may); at 1b7540f it slid off,
 /// and the overlap ratcheted up by up to `TOI_GAP` per impact event (25–30
-/// events a step) from 3.8 µm at t = 0.20 s to 21 µm at 0.31 s.
-#[ignore = "bug: an overlap ratchets up by up to TOI_GAP per impact event while a cube slides off a ridge: 21 µm from t = 0.25 s"]
+/// events a step) from 3.8 µm at t = 0.20 s to 21 µm at 0.31 s. Since the
+/// bisection places an impact where V-Clip finds the pair apart, nothing
+/// ratchets.
 #[test]
 fn parallel_edges_land_and_come_to_rest_within_the_contact_tolerance() {
     let (pen, first, _) = edge_on_edge("parallel", &q(Vector3::x(), std::f64::consts::FRAC_PI_4));
@@ -1172,9 +1173,9 @@ proptest! {
 
     /// The same 24 scenes: no energy gain, no step adding more than 1e-3 of
     /// the energy scale, overlaps within a stated bound of 2 mm.
+    /// (Ignored until the energy guard and the V-Clip bisection: at 1b7540f
+    /// one step added 257 J to a scene of 1.55 kJ.)
     #[test]
-    #[ignore = "bug: one step adds 257 J to a scene of 1.55 kJ (t = 0.56 s, 1b7540f and 6fdb978); \
-                energy explosions, see heavy_hull_gains_2_mj_in_one_step"]
     fn random_scenes_keep_the_invariants(bodies in prop::collection::vec(body_strategy(), 2..13)) {
         check_random_scene(&bodies, 2e-3, true)?;
     }

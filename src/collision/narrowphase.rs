@@ -6,7 +6,7 @@
 //! thesis's hash table of feature pairs stays valid wherever a pair is sent.
 
 use super::manifold::{self, ContactPoint};
-use super::vclip::{self, FeaturePair};
+use super::vclip::{self, FeaturePair, Proximity};
 use crate::body::{BodyId, ObjectDef};
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
@@ -113,56 +113,146 @@ impl PairResult {
 
 /// Runs V-Clip on the part pairs of one body pair.
 pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
-    let oa = &objects[task.object_a as usize];
-    let ob = &objects[task.object_b as usize];
+    let (oa, ob) = (
+        &objects[task.object_a as usize],
+        &objects[task.object_b as usize],
+    );
     let mut out = PairResult {
         distance: f64::INFINITY,
         ..Default::default()
     };
-    let margin = task.contact_tolerance;
-    for (ia, pa) in oa.parts.iter().enumerate() {
+    for (ia, ib) in close_part_pairs(oa, ob, task) {
+        let prox = part_proximity(oa, ob, task, ia, ib);
+        add_part_pair(&mut out, oa, ob, task, ia, ib, &prox);
+    }
+    out
+}
+
+/// A lower bound on the gap between the part pairs that `query_pair` does
+/// not test (their part spheres are further apart than the contact
+/// tolerance): the smallest gap between those spheres, +∞ when every part
+/// pair is tested. With the query's own `distance` it bounds the gap of the
+/// whole body pair from below.
+pub fn untested_gap(objects: &[ObjectDef], task: &PairTask) -> f64 {
+    let (oa, ob) = (
+        &objects[task.object_a as usize],
+        &objects[task.object_b as usize],
+    );
+    let mut gap = f64::INFINITY;
+    for pa in &oa.parts {
         let ca = task.pose_a * Point3::from(pa.sphere.center);
-        for (ib, pb) in ob.parts.iter().enumerate() {
+        for pb in &ob.parts {
             let cb = task.pose_b * Point3::from(pb.sphere.center);
-            let reach = pa.sphere.radius + pb.sphere.radius + margin;
-            if (ca - cb).norm_squared() > reach * reach {
-                continue;
-            }
-            let warm = task
-                .warm
-                .iter()
-                .find(|c| c.part_a as usize == ia && c.part_b as usize == ib)
-                .map(|c| c.features);
-            let prox =
-                vclip::closest_features(&pa.hull, &task.pose_a, &pb.hull, &task.pose_b, warm);
-            out.iterations += prox.iterations;
-            out.part_pairs_tested += 1;
-            out.features.push(CachedFeatures {
-                part_a: ia as u16,
-                part_b: ib as u16,
-                features: prox.features,
-            });
-            out.distance = out.distance.min(if prox.penetrating {
-                prox.distance.min(0.0)
-            } else {
-                prox.distance
-            });
-            out.penetrating |= prox.penetrating;
-            if prox.penetrating || prox.distance <= task.contact_tolerance {
-                let points = manifold::contact_points(
-                    &pa.hull,
-                    &task.pose_a,
-                    &pb.hull,
-                    &task.pose_b,
-                    &prox,
-                    task.contact_tolerance,
-                );
-                for p in reduce_contacts(points, MAX_POINTS_PER_PART_PAIR) {
-                    out.depth = out.depth.max(-p.separation);
-                    out.contacts.push(p);
-                }
+            let g = (ca - cb).norm() - pa.sphere.radius - pb.sphere.radius;
+            if g > task.contact_tolerance {
+                gap = gap.min(g);
             }
         }
     }
-    out
+    gap
+}
+
+/// V-Clip alone: `None` when a part pair overlaps, else the smallest gap.
+pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
+    let (oa, ob) = (
+        &objects[task.object_a as usize],
+        &objects[task.object_b as usize],
+    );
+    let mut gap = f64::INFINITY;
+    for (ia, ib) in close_part_pairs(oa, ob, task) {
+        let prox = part_proximity(oa, ob, task, ia, ib);
+        if prox.penetrating {
+            return None;
+        }
+        gap = gap.min(prox.distance);
+    }
+    Some(gap)
+}
+
+/// Part pairs whose part spheres come within the contact tolerance.
+fn close_part_pairs<'a>(
+    oa: &'a ObjectDef,
+    ob: &'a ObjectDef,
+    task: &'a PairTask,
+) -> impl Iterator<Item = (usize, usize)> + 'a {
+    let margin = task.contact_tolerance;
+    let centres_b: Vec<Point3<f64>> = ob
+        .parts
+        .iter()
+        .map(|pb| task.pose_b * Point3::from(pb.sphere.center))
+        .collect();
+    oa.parts.iter().enumerate().flat_map(move |(ia, pa)| {
+        let ca = task.pose_a * Point3::from(pa.sphere.center);
+        let centres_b = centres_b.clone();
+        ob.parts.iter().enumerate().filter_map(move |(ib, pb)| {
+            let reach = pa.sphere.radius + pb.sphere.radius + margin;
+            ((ca - centres_b[ib]).norm_squared() <= reach * reach).then_some((ia, ib))
+        })
+    })
+}
+
+/// V-Clip on one part pair, from its cached features. The cache lists part
+/// pairs in order (as `query_pair` writes it), so a binary search finds one.
+fn part_proximity(
+    oa: &ObjectDef,
+    ob: &ObjectDef,
+    task: &PairTask,
+    ia: usize,
+    ib: usize,
+) -> Proximity {
+    let key = (ia as u16, ib as u16);
+    let warm = if task.warm.is_sorted_by_key(|c| (c.part_a, c.part_b)) {
+        task.warm
+            .binary_search_by_key(&key, |c| (c.part_a, c.part_b))
+            .ok()
+            .map(|k| task.warm[k].features)
+    } else {
+        task.warm
+            .iter()
+            .find(|c| (c.part_a, c.part_b) == key)
+            .map(|c| c.features)
+    };
+    let (pa, pb) = (&oa.parts[ia], &ob.parts[ib]);
+    vclip::closest_features(&pa.hull, &task.pose_a, &pb.hull, &task.pose_b, warm)
+}
+
+/// Adds one part pair's proximity, and its contact points when touching,
+/// to `out`.
+fn add_part_pair(
+    out: &mut PairResult,
+    oa: &ObjectDef,
+    ob: &ObjectDef,
+    task: &PairTask,
+    ia: usize,
+    ib: usize,
+    prox: &Proximity,
+) {
+    out.iterations += prox.iterations;
+    out.part_pairs_tested += 1;
+    out.features.push(CachedFeatures {
+        part_a: ia as u16,
+        part_b: ib as u16,
+        features: prox.features,
+    });
+    out.distance = out.distance.min(if prox.penetrating {
+        prox.distance.min(0.0)
+    } else {
+        prox.distance
+    });
+    out.penetrating |= prox.penetrating;
+    if prox.penetrating || prox.distance <= task.contact_tolerance {
+        let (ha, hb) = (&oa.parts[ia].hull, &ob.parts[ib].hull);
+        let points = manifold::contact_points(
+            ha,
+            &task.pose_a,
+            hb,
+            &task.pose_b,
+            prox,
+            task.contact_tolerance,
+        );
+        for p in reduce_contacts(points, MAX_POINTS_PER_PART_PAIR) {
+            out.depth = out.depth.max(-p.separation);
+            out.contacts.push(p);
+        }
+    }
 }
