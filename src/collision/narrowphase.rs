@@ -8,7 +8,7 @@
 use super::manifold::{self, ContactPoint};
 use super::vclip::{self, FeaturePair, Proximity};
 use crate::body::{BodyId, ObjectDef};
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Gap below which two surfaces count as touching, metres.
@@ -126,6 +126,33 @@ pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
         add_part_pair(&mut out, oa, ob, task, ia, ib, &prox);
     }
     out
+}
+
+/// `min_A(n·x) − max_B(n·x)` over every part of both bodies, world
+/// direction `n`: when positive, a plane normal to `n` separates the bodies
+/// and this is a lower bound on their distance.
+pub fn separation_along(objects: &[ObjectDef], task: &PairTask, n: &Vector3<f64>) -> f64 {
+    let (oa, ob) = (
+        &objects[task.object_a as usize],
+        &objects[task.object_b as usize],
+    );
+    let (na, nb) = (
+        task.pose_a.rotation.inverse() * n,
+        task.pose_b.rotation.inverse() * n,
+    );
+    let low_a = oa
+        .parts
+        .iter()
+        .map(|p| p.hull.support(&-na).dot(&na))
+        .fold(f64::INFINITY, f64::min)
+        + n.dot(&task.pose_a.translation.vector);
+    let high_b = ob
+        .parts
+        .iter()
+        .map(|p| p.hull.support(&nb).dot(&nb))
+        .fold(f64::NEG_INFINITY, f64::max)
+        + n.dot(&task.pose_b.translation.vector);
+    low_a - high_b
 }
 
 /// A lower bound on the gap between the part pairs that `query_pair` does
