@@ -75,13 +75,19 @@ pub struct Pose {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Frame {
     pub index: u64,
+    /// The index of the first frame this run publishes: 0, or on a resumed
+    /// run the checkpoint's next frame index. Every frame carries it because
+    /// the render rank never sees the checkpoint, and the first frame it
+    /// receives may not be the run's first (frames can be dropped).
+    pub first_index: u64,
     pub time: f64,
     pub poses: Vec<Pose>,
 }
 
-pub fn frame_of(world: &World, index: u64) -> Frame {
+pub fn frame_of(world: &World, index: u64, first_index: u64) -> Frame {
     Frame {
         index,
+        first_index,
         time: world.time(),
         poses: world
             .bodies
@@ -125,8 +131,16 @@ pub struct FrameRenderer {
     instances: Vec<render::Instance>,
     dir: PathBuf,
     video: Option<render::VideoWriter>,
+    /// Whether `video` has been given the frames of the run this one resumes
+    /// (see [`FrameRenderer::replay_earlier_frames`]).
+    replayed: bool,
     pub rendered: u64,
     pub notes: Vec<String>,
+}
+
+/// Where frame `index` is written: `frames/frame_00042.png`.
+fn frame_path(dir: &Path, index: u64) -> PathBuf {
+    dir.join(format!("frame_{index:05}.png"))
 }
 
 impl FrameRenderer {
@@ -221,6 +235,7 @@ impl FrameRenderer {
             instances,
             dir,
             video,
+            replayed: false,
             rendered: 0,
             notes,
         })
@@ -241,8 +256,9 @@ impl FrameRenderer {
     }
 
     pub fn render_frame(&mut self, frame: &Frame) -> Result<(), String> {
+        self.replay_earlier_frames(frame.first_index);
         let image = self.draw(frame)?;
-        let path = self.dir.join(format!("frame_{:05}.png", frame.index));
+        let path = frame_path(&self.dir, frame.index);
         render::write_png(&path, &image).map_err(|e| e.to_string())?;
         if let Some(v) = self.video.as_mut() {
             v.push(&image).map_err(|e| e.to_string())?;
@@ -260,10 +276,68 @@ impl FrameRenderer {
             .unwrap_or(Path::new("."))
             .join("preview.png");
         render::write_png(&preview, &image).map_err(|e| e.to_string())?;
+        // A run resumed at its very end publishes no frame: its video is
+        // still the whole of the earlier run's.
+        self.replay_earlier_frames(last.first_index);
         if let Some(v) = self.video.take() {
             v.finish().map_err(|e| e.to_string())?;
         }
         Ok(())
+    }
+
+    /// Feeds the new video the frames `0..first` that the run this one
+    /// resumes left in `frames/`, once, before this run's first frame.
+    ///
+    /// ffmpeg cannot append to an MP4, so a resumed run's `video.mp4` is a
+    /// new stream; without this it would hold only the frames after the
+    /// checkpoint. Frames are read back from the PNGs rather than re-rendered
+    /// because only the checkpoint's state is known, not the earlier ones.
+    /// Frames the stopped run wrote after its checkpoint have indices
+    /// `first` and up: this run renders (and overwrites) them again, so they
+    /// are not read. A missing or unreadable file is left out and reported
+    /// in one note; it never stops the run. Without ffmpeg nothing is read.
+    fn replay_earlier_frames(&mut self, first: u64) {
+        if self.replayed {
+            return;
+        }
+        self.replayed = true;
+        let Some(video) = self.video.as_mut() else {
+            return;
+        };
+        let mut left_out = 0u64;
+        let mut first_problem = None;
+        for index in 0..first {
+            let path = frame_path(&self.dir, index);
+            let problem = match render::read_png(&path) {
+                Ok(image) => match video.push(&image) {
+                    Ok(()) => continue,
+                    // The scene's [render] size changed between the runs.
+                    Err(e @ render::RenderError::FrameSize { .. }) => {
+                        format!("{}: {e}", path.display())
+                    }
+                    // ffmpeg itself failed; the frames this run renders
+                    // will report it too.
+                    Err(e) => {
+                        self.notes.push(format!(
+                            "video.mp4: stopped adding the frames before frame {first}: {e}"
+                        ));
+                        return;
+                    }
+                },
+                Err(e) => e.to_string(),
+            };
+            left_out += 1;
+            first_problem.get_or_insert(problem);
+        }
+        if let Some(problem) = first_problem {
+            let note = format!(
+                "video.mp4: {left_out} of the {first} frames before the resumed run's first \
+                 (frame {first}) are missing or unusable in {} and were left out; first: {problem}",
+                self.dir.display()
+            );
+            eprintln!("rigidsim: {note}");
+            self.notes.push(note);
+        }
     }
 }
 
@@ -367,7 +441,10 @@ pub fn run_coordinator(
     let started = Instant::now();
     let mut frame_started = Instant::now();
     let mut worst_frame: f64 = 0.0;
-    let mut frame_index = marks.as_ref().map_or(0, |m| m.frame_index);
+    // A resumed run continues the frame numbering of the run it resumes, so
+    // its frames overwrite those the stopped run drew after the checkpoint.
+    let first_frame = marks.as_ref().map_or(0, |m| m.frame_index);
+    let mut frame_index = first_frame;
     // A fresh run samples t = 0; a resumed one continues the trajectory it
     // finds (which already holds the rows up to the checkpoint) or, in a new
     // folder, starts it at the checkpoint's time.
@@ -377,7 +454,7 @@ pub fn run_coordinator(
     }
     if render_stride.is_some() && marks.is_none() {
         let clock = Instant::now();
-        frames.publish(frame_of(&world, frame_index));
+        frames.publish(frame_of(&world, frame_index, first_frame));
         frame_index += 1;
         world.stage.render += clock.elapsed().as_secs_f64();
     }
@@ -415,7 +492,7 @@ pub fn run_coordinator(
         if let Some(stride) = render_stride {
             if s % stride == 0 {
                 let clock = Instant::now();
-                frames.publish(frame_of(&world, frame_index));
+                frames.publish(frame_of(&world, frame_index, first_frame));
                 frame_index += 1;
                 world.stage.render += clock.elapsed().as_secs_f64();
             }
@@ -470,7 +547,7 @@ pub fn run_coordinator(
     let wall = started.elapsed().as_secs_f64();
     let clock = Instant::now();
     let (frames_rendered, frames_dropped, adapter, frame_notes) = if render_stride.is_some() {
-        frames.finish(frame_of(&world, frame_index))
+        frames.finish(frame_of(&world, frame_index, first_frame))
     } else {
         (0, 0, None, Vec::new())
     };

@@ -8,7 +8,8 @@
 //! `--no-sleep` is refused with a message that says which; a damaged file is
 //! an error, never a panic. A numerical failure keeps the last good
 //! checkpoint, a trajectory of complete, finite lines, and a summary with
-//! `end_reason = "failed"` naming the body, the stage and the time.
+//! `end_reason = "failed"` naming the body, the stage and the time. A
+//! resumed run with rendering ends with a `video.mp4` of the whole run.
 
 mod common;
 
@@ -686,4 +687,136 @@ fn refused_resume_ends_every_rank_with_status_2() {
             assert!(started.elapsed() < Duration::from_secs(30));
         }
     }
+}
+
+// ------------------------------------------------------------ rendered runs
+
+/// `rigidsim ARGS` on one rank with rendering on (`command` turns it off).
+fn run_rendered(args: &[&str]) -> Outcome {
+    let out = Command::new(BIN)
+        .args(args)
+        .arg("--no-progress")
+        .stdin(Stdio::null())
+        .output()
+        .expect("cannot start rigidsim");
+    Outcome {
+        code: out.status.code(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+fn installed(tool: &str) -> bool {
+    Command::new(tool)
+        .arg("-version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// The number of frames in a video, counted by decoding every one.
+fn video_frames(path: &Path) -> u64 {
+    let out = Command::new("ffprobe")
+        .args(["-v", "error", "-count_frames", "-select_streams", "v:0"])
+        .args(["-show_entries", "stream=nb_read_frames", "-of", "csv=p=0"])
+        .arg(path)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    text.trim()
+        .parse()
+        .unwrap_or_else(|_| panic!("ffprobe on {}: {text:?}", path.display()))
+}
+
+/// One MD5 line per decoded frame, in order.
+fn video_frame_hashes(path: &Path) -> String {
+    let out = Command::new("ffmpeg")
+        .args(["-v", "error", "-i"])
+        .arg(path)
+        .args(["-f", "framemd5", "-"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "ffmpeg could not decode {}",
+        path.display()
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Issue 8, "Resuming with rendering": a resumed run's `video.mp4` holds the
+/// whole run, the stopped run's frames up to the checkpoint and then its
+/// own, not only the frames after the checkpoint; the frames the stopped run
+/// drew after its checkpoint are not in it twice. A frame file gone missing
+/// is left out with one note, and the run still succeeds.
+#[test]
+fn resumed_run_video_holds_the_whole_run() {
+    if !installed("ffmpeg") || !installed("ffprobe") {
+        println!("skipped: ffmpeg or ffprobe is not installed (scripts/setup.sh installs them)");
+        return;
+    }
+    let _one = one_at_a_time();
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    // 0.5 s, a frame every 0.05 s from t = 0: 11 frames.
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/render_check.toml");
+    let whole = root.join("whole");
+    let r = run_rendered(&[s(&scene), "--out", s(&whole)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let whole_frames = video_frames(&whole.join("video.mp4"));
+    assert_eq!(whole_frames, 11, "the uninterrupted run");
+
+    // A run that checkpoints at t = 0.2 s (frames 0–4 drawn, next index 5)
+    // and draws frames 5–7 before it stops at 0.35 s: the same run to 0.2 s
+    // with a checkpoint, then to 0.35 s without one, into the same folder.
+    let dir = root.join("stopped");
+    let r = run_rendered(&[
+        s(&scene),
+        "--duration",
+        "0.2",
+        "--checkpoint-every",
+        "0.1",
+        "--out",
+        s(&dir),
+    ]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let resume = root.join("resume-from.bin");
+    std::fs::rename(dir.join(FILE_NAME), &resume).unwrap();
+    assert_eq!(Checkpoint::read(&resume).unwrap().run.frame_index, 5);
+    let r = run_rendered(&[s(&scene), "--duration", "0.35", "--out", s(&dir)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(dir.join("frames/frame_00007.png").exists());
+
+    let r = run_rendered(&[s(&scene), "--resume", s(&resume), "--out", s(&dir)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert_eq!(
+        video_frames(&dir.join("video.mp4")),
+        whole_frames,
+        "the resumed run's video.mp4 does not hold the whole run"
+    );
+    assert_eq!(summary(&dir)["frames_rendered"], 6, "frames 5–10");
+    // The same images in the same order: rendering and libx264 are
+    // deterministic on one machine.
+    assert!(
+        video_frame_hashes(&dir.join("video.mp4")) == video_frame_hashes(&whole.join("video.mp4")),
+        "the resumed run's video differs from the uninterrupted run's"
+    );
+    let notes = summary(&dir)["notes"].to_string();
+    assert!(!notes.contains("video.mp4"), "unexpected note: {notes}");
+
+    // A frame from before the checkpoint gone missing: left out, said once.
+    std::fs::remove_file(dir.join("frames/frame_00002.png")).unwrap();
+    let r = run_rendered(&[s(&scene), "--resume", s(&resume), "--out", s(&dir)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert_eq!(video_frames(&dir.join("video.mp4")), whole_frames - 1);
+    let notes = summary(&dir)["notes"].as_array().unwrap().clone();
+    let about_video: Vec<_> = notes
+        .iter()
+        .filter_map(|n| n.as_str())
+        .filter(|n| n.contains("video.mp4"))
+        .collect();
+    assert_eq!(about_video.len(), 1, "{notes:?}");
+    assert!(
+        about_video[0].contains("1 of the 5 frames") && about_video[0].contains("frame_00002.png"),
+        "{}",
+        about_video[0]
+    );
 }

@@ -1,5 +1,5 @@
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufReader, BufWriter};
 use std::path::Path;
 
 use super::RenderError;
@@ -53,4 +53,41 @@ pub fn write_png(path: impl AsRef<Path>, image: &Image) -> Result<(), RenderErro
     let mut writer = encoder.write_header().map_err(png_err)?;
     writer.write_image_data(&image.rgba).map_err(png_err)?;
     writer.finish().map_err(png_err)
+}
+
+/// Reads back a frame written by [`write_png`]: 8-bit RGBA, any size (the
+/// caller checks it). A resumed run uses it to put the frames of the run it
+/// continues at the head of its video. The `png` crate's default limits
+/// (64 MiB of decoded image) refuse a damaged header before allocating.
+pub fn read_png(path: impl AsRef<Path>) -> Result<Image, RenderError> {
+    let path = path.as_ref();
+    let file = File::open(path).map_err(|source| RenderError::Io {
+        what: "opening PNG",
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let bad = |reason: String| RenderError::PngRead {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let mut reader = png::Decoder::new(BufReader::new(file))
+        .read_info()
+        .map_err(|e| bad(e.to_string()))?;
+    let (color, depth) = reader.output_color_type();
+    if (color, depth) != (png::ColorType::Rgba, png::BitDepth::Eight) {
+        return Err(bad(format!("{color:?} {depth:?}, not 8-bit RGBA")));
+    }
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| bad("image too large".into()))?;
+    let mut rgba = vec![0; size];
+    let info = reader
+        .next_frame(&mut rgba)
+        .map_err(|e| bad(e.to_string()))?;
+    rgba.truncate(info.buffer_size());
+    Ok(Image {
+        width: info.width,
+        height: info.height,
+        rgba,
+    })
 }

@@ -3,7 +3,8 @@
 //! The last MPI rank receives each body's pose at every screen update and
 //! draws it here: headless wgpu (no window, no surface), read back into an
 //! [`Image`], then written as PNG ([`write_png`]) or streamed to ffmpeg
-//! ([`VideoWriter`]). This module knows nothing of scenes or MPI: it takes
+//! ([`VideoWriter`]); [`read_png`] reads a frame back for a resumed run's
+//! video. This module knows nothing of scenes or MPI: it takes
 //! plain meshes, poses and colours, so the rank that owns it can be tested
 //! on its own.
 //!
@@ -33,7 +34,7 @@ use std::path::PathBuf;
 
 pub use camera::{Camera, look_at_scene};
 pub use gpu::Renderer;
-pub use image::{Image, write_png};
+pub use image::{Image, read_png, write_png};
 pub use mesh::Mesh;
 pub use video::VideoWriter;
 
@@ -110,6 +111,8 @@ pub enum RenderError {
         path: PathBuf,
         source: png::EncodingError,
     },
+    #[error("reading PNG {}: {reason}", path.display())]
+    PngRead { path: PathBuf, reason: String },
     #[error("ffmpeg failed on {}: {message}", path.display())]
     Ffmpeg { path: PathBuf, message: String },
 }
