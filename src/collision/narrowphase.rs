@@ -125,7 +125,38 @@ pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
         let prox = part_proximity(oa, ob, task, ia, ib);
         add_part_pair(&mut out, oa, ob, task, ia, ib, &prox);
     }
+    out.contacts = reduce_per_normal(std::mem::take(&mut out.contacts));
     out
+}
+
+/// Contact normals closer than this (1 − cos of about 45 µrad) count as one
+/// contact plane when a body pair's points are reduced.
+const SAME_NORMAL: f64 = 1e-9;
+
+/// Reduces a body pair's points plane by plane to `MAX_POINTS_PER_PART_PAIR`
+/// each. A concave body's parts often touch in one plane (a nut lying flat
+/// on the floor: 32 wedges, up to 256 points, one support polygon); the LCP's
+/// cost grows with the cube of its rows, and the extreme points of the whole
+/// patch carry the same support polygon. Planes keep the order in which they
+/// first appear, so the result does not depend on anything but the query.
+fn reduce_per_normal(points: Vec<ContactPoint>) -> Vec<ContactPoint> {
+    if points.len() <= MAX_POINTS_PER_PART_PAIR {
+        return points;
+    }
+    let mut planes: Vec<Vec<ContactPoint>> = Vec::new();
+    for p in points {
+        match planes
+            .iter_mut()
+            .find(|g| g[0].normal.dot(&p.normal) >= 1.0 - SAME_NORMAL)
+        {
+            Some(g) => g.push(p),
+            None => planes.push(vec![p]),
+        }
+    }
+    planes
+        .into_iter()
+        .flat_map(|g| reduce_contacts(g, MAX_POINTS_PER_PART_PAIR))
+        .collect()
 }
 
 /// `min_A(n·x) − max_B(n·x)` over every part of both bodies, world
