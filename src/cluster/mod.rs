@@ -145,9 +145,6 @@ fn pause(spins: u32) {
 /// planned to take milliseconds; even a slowed PC answers within seconds).
 const REPLY_DEADLINE: Duration = Duration::from_secs(10);
 
-/// A stage is distributed only when its estimated cost exceeds this many
-/// round-trip latencies per worker (below it, messages cost more than they save).
-const DISTRIBUTE_LATENCIES: f64 = 4.0;
 /// Share of its speed that rank 0 plans for itself (it also packs and merges).
 const COORDINATOR_SHARE: f64 = 0.5;
 
@@ -284,17 +281,31 @@ impl<'w> MpiExecutor<'w> {
         }
     }
 
-    fn should_distribute(&self, estimated_s: f64, tasks: usize) -> bool {
-        if self.roles.workers.is_empty() || tasks < 2 {
-            return false;
+    /// Workers a stage of this estimated cost should use (0: rank 0 alone),
+    /// from the measured round trip and the estimated speeds; see
+    /// `schedule::workers_to_use`. `--force-distribute` uses them all.
+    fn workers_for(&self, estimated_s: f64, tasks: usize) -> usize {
+        let workers = self.roles.workers.len();
+        if workers == 0 || tasks < 2 {
+            return 0;
         }
-        self.force_distribute
-            || estimated_s > DISTRIBUTE_LATENCIES * self.latency_s * self.roles.workers.len() as f64
+        if self.force_distribute {
+            return workers;
+        }
+        schedule::workers_to_use(estimated_s, &self.speeds, COORDINATOR_SHARE, self.latency_s)
     }
 
-    /// Splits tasks by the greedy rule; returns per slot the task indices.
-    fn plan(&self, costs: &[f64]) -> Vec<Vec<usize>> {
-        let slot = schedule::assign(costs, &self.speeds, COORDINATOR_SHARE);
+    /// Splits tasks by the greedy rule over rank 0 and the `k` fastest
+    /// workers; returns per slot the task indices.
+    fn plan(&self, costs: &[f64], k: usize) -> Vec<Vec<usize>> {
+        let used = schedule::fastest_slots(&self.speeds, k);
+        let speeds: Vec<f64> = self
+            .speeds
+            .iter()
+            .zip(&used)
+            .map(|(&s, &u)| if u { s } else { 0.0 })
+            .collect();
+        let slot = schedule::assign(costs, &speeds, COORDINATOR_SHARE);
         let mut per = vec![Vec::new(); self.speeds.len()];
         for (i, s) in slot.into_iter().enumerate() {
             per[s].push(i);
@@ -305,6 +316,7 @@ impl<'w> MpiExecutor<'w> {
     /// Generic scatter–compute–gather for one stage.
     fn distribute<T: Clone, R>(
         &mut self,
+        workers: usize,
         tasks: Vec<T>,
         costs: &[f64],
         make: impl Fn(Vec<T>) -> Req,
@@ -314,7 +326,7 @@ impl<'w> MpiExecutor<'w> {
     where
         R: Default + Clone,
     {
-        let plan = self.plan(costs);
+        let plan = self.plan(costs, workers);
         // Send each worker its share (one message each).
         for (k, idx) in plan.iter().enumerate().skip(1) {
             if idx.is_empty() {
@@ -457,7 +469,8 @@ impl Executor for MpiExecutor<'_> {
             .collect();
         let costs: Vec<f64> = units.iter().map(|u| u * self.model.pair_coef).collect();
         let total: f64 = costs.iter().sum();
-        if !self.should_distribute(total, tasks.len()) {
+        let workers = self.workers_for(total, tasks.len());
+        if workers == 0 {
             self.dist.narrowphase_local += 1;
             let clock = Instant::now();
             let r: Vec<PairResult> = tasks
@@ -472,6 +485,7 @@ impl Executor for MpiExecutor<'_> {
         }
         self.dist.narrowphase_distributed += 1;
         let (results, total_busy, own_tasks) = self.distribute(
+            workers,
             tasks,
             &costs,
             |share| Req::Narrowphase { tasks: share },
@@ -504,7 +518,8 @@ impl Executor for MpiExecutor<'_> {
             .collect();
         let costs: Vec<f64> = units.iter().map(|u| u * self.model.island_coef).collect();
         let total: f64 = costs.iter().sum();
-        if !self.should_distribute(total, tasks.len()) {
+        let workers = self.workers_for(total, tasks.len());
+        if workers == 0 {
             self.dist.solve_local += 1;
             let clock = Instant::now();
             let r: Vec<IslandResult> = tasks.iter().map(solver::solve_island).collect();
@@ -516,6 +531,7 @@ impl Executor for MpiExecutor<'_> {
         }
         self.dist.solve_distributed += 1;
         let (results, total_busy, own_tasks) = self.distribute(
+            workers,
             tasks,
             &costs,
             |share| Req::SolveIslands { tasks: share },

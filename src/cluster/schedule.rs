@@ -129,6 +129,57 @@ pub fn assign(costs: &[f64], speeds: &[f64], coordinator_share: f64) -> Vec<usiz
     slot
 }
 
+/// A stage must be predicted this much faster distributed than alone before
+/// it is distributed: estimates and latencies are noisy, and a stage that
+/// flips between the two every frame gains nothing.
+pub const DISTRIBUTE_MARGIN: f64 = 0.1;
+
+/// How many workers a stage should use: 0 (rank 0 alone) or the k fastest.
+///
+/// Alone, the stage takes `estimated_s / speeds[0]`. With the k fastest
+/// workers it takes its share of the work at their combined speed (rank 0
+/// counted at `coordinator_share`), plus the messages: rank 0 posts k
+/// requests one after another and waits for the last reply, about
+/// (1 + k/2) round trips of `round_trip_s`. More workers divide the work
+/// further but add messages, so beyond some k they cost more than they
+/// save; the thesis's finding that one PC is faster below 15–20 bodies is
+/// the k = 0 end of this. Ties go to fewer workers.
+pub fn workers_to_use(
+    estimated_s: f64,
+    speeds: &[f64],
+    coordinator_share: f64,
+    round_trip_s: f64,
+) -> usize {
+    let alone = estimated_s / speeds[0].max(1e-9);
+    let mut workers: Vec<f64> = speeds[1..].to_vec();
+    workers.sort_by(|a, b| b.total_cmp(a));
+    let mut combined = speeds[0] * coordinator_share;
+    let (mut best, mut best_time) = (0, alone * (1.0 - DISTRIBUTE_MARGIN));
+    for (k, s) in workers.iter().enumerate() {
+        combined += s.max(0.0);
+        let k = k + 1;
+        let time = estimated_s / combined.max(1e-9) + round_trip_s * (1.0 + 0.5 * k as f64);
+        if time < best_time {
+            best = k;
+            best_time = time;
+        }
+    }
+    best
+}
+
+/// The slots of rank 0 and of the `k` fastest workers (ties to the lower
+/// slot, so the choice is deterministic), as a mask over `speeds`.
+pub fn fastest_slots(speeds: &[f64], k: usize) -> Vec<bool> {
+    let mut order: Vec<usize> = (1..speeds.len()).collect();
+    order.sort_by(|&i, &j| speeds[j].total_cmp(&speeds[i]).then(i.cmp(&j)));
+    let mut used = vec![false; speeds.len()];
+    used[0] = true;
+    for &slot in order.iter().take(k) {
+        used[slot] = true;
+    }
+    used
+}
+
 /// Finishing time of the slowest rank for an assignment (for tests and docs).
 pub fn makespan(costs: &[f64], speeds: &[f64], slot: &[usize]) -> f64 {
     let mut load = vec![0.0; speeds.len()];
@@ -144,6 +195,42 @@ pub fn makespan(costs: &[f64], speeds: &[f64], slot: &[usize]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn small_stages_stay_on_rank_0_and_large_ones_use_every_worker() {
+        let speeds = [1.0, 1.0, 1.0, 1.0, 1.0];
+        // 10 µs of work against 50 µs round trips: alone.
+        assert_eq!(workers_to_use(1e-5, &speeds, 0.5, 5e-5), 0);
+        // 1 s of work: messages are noise, use all four workers.
+        assert_eq!(workers_to_use(1.0, &speeds, 0.5, 5e-5), 4);
+        // 0.3 ms of work, 50 µs round trips: three workers (0.211 ms)
+        // beat four (0.217 ms: the fourth's message costs more than its
+        // share saves), two (0.220 ms) and rank 0 alone (0.3 ms).
+        assert_eq!(workers_to_use(3e-4, &speeds, 0.5, 5e-5), 3);
+        // No latency at all: every worker helps.
+        assert_eq!(workers_to_use(1e-3, &speeds, 0.5, 0.0), 4);
+    }
+
+    #[test]
+    fn a_much_slower_worker_is_left_out_and_the_fastest_are_chosen() {
+        let speeds = [1.0, 0.01, 1.0, 1.0];
+        let k = workers_to_use(1e-2, &speeds, 0.5, 1e-4);
+        assert_eq!(k, 2, "the worker at 1 % speed adds messages, not speed");
+        assert_eq!(fastest_slots(&speeds, k), vec![true, false, true, true]);
+        // Ties go to the lower slot.
+        assert_eq!(
+            fastest_slots(&[1.0, 2.0, 2.0, 2.0], 2),
+            vec![true, true, true, false]
+        );
+    }
+
+    #[test]
+    fn distributing_needs_a_margin_over_working_alone() {
+        // One equal worker, no latency: 1 / 1.5 of the time alone, a 33 %
+        // gain, distributes; a worker so slow it gains under 10 % does not.
+        assert_eq!(workers_to_use(1e-3, &[1.0, 1.0], 0.5, 0.0), 1);
+        assert_eq!(workers_to_use(1e-3, &[1.0, 0.55], 0.5, 0.0), 0);
+    }
 
     #[test]
     fn thesis_example_greedy_gives_13_75_seconds() {
