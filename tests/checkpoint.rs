@@ -575,7 +575,8 @@ start = 0.505
         let why = sum["failure"].as_str().unwrap();
         for part in [
             "t = 0.520000 s",
-            "stage",
+            // The force did it, over the step: not a contact solve.
+            "in stage integrate",
             "body 1",
             "exploded",
             "last good checkpoint",
