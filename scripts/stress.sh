@@ -96,7 +96,7 @@ drift = sum((a - b) ** 2 for a, b in zip(first, last)) ** 0.5 if first else floa
 c = s["counters"]
 print(f"{name:<26} {s['sim_time_s']:>8.1f} {s['wall_time_s']:>7.1f} {s['max_penetration_m']:>10.2e} "
       f"{drift:>10.2e} {s['energy_final_j'] - s['energy_initial_j']:>+10.2e} "
-      f"{len(c['solve']['failures']):>6} {c['overlaps_accepted']:>5}  {s['end_reason']}"
+      f"{c['solve']['failed']:>6} {c['overlaps_accepted']:>5}  {s['end_reason']}"
       + (f" ({s['bodies_fallen']} fell off)" if s['bodies_fallen'] else ""))
 PY
 )")

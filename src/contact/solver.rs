@@ -103,14 +103,30 @@ pub struct SolveStats {
     pub rows: u32,
     pub friction_rows: u32,
     pub pivots: u64,
-    /// Solves that failed and fell back to projected Gauss–Seidel (sizes listed).
+    /// Solves whose exact answer was not used: the LCP failed (and the
+    /// compliant retry, where tried) and projected Gauss–Seidel answered, or
+    /// the energy guard rejected the answer.
+    pub failed: u64,
+    /// The first `FAILURES_KEPT` of them, with system size and reason. Only
+    /// examples: a long crowd run fails thousands of times, and this list
+    /// travels in every reply, summary and checkpoint.
     pub failures: Vec<(u32, String)>,
     /// Solves that failed on the exact system and were solved exactly with
     /// the contacts made slightly compliant (`COMPLIANCE`).
     pub compliant_solves: u32,
 }
 
+/// Failure examples kept in `SolveStats::failures`.
+pub const FAILURES_KEPT: usize = 32;
+
 impl SolveStats {
+    fn record_failure(&mut self, rows: usize, why: String) {
+        self.failed += 1;
+        if self.failures.len() < FAILURES_KEPT {
+            self.failures.push((rows as u32, why));
+        }
+    }
+
     pub fn add(&mut self, o: &SolveStats) {
         self.lcp_solves += o.lcp_solves;
         self.closed_form_solves += o.closed_form_solves;
@@ -118,7 +134,9 @@ impl SolveStats {
         self.rows += o.rows;
         self.friction_rows += o.friction_rows;
         self.pivots += o.pivots;
-        self.failures.extend(o.failures.iter().cloned());
+        self.failed += o.failed;
+        let room = FAILURES_KEPT.saturating_sub(self.failures.len());
+        self.failures.extend(o.failures.iter().take(room).cloned());
         self.compliant_solves += o.compliant_solves;
     }
 }
@@ -386,7 +404,7 @@ fn solve_phase(
                 sol.x
             }
             Err(_) => {
-                stats.failures.push((m as u32, e.to_string()));
+                stats.record_failure(m, e.to_string());
                 fallback(&a, m, &rhs, &lo, &hi, &findex)
             }
         },
@@ -461,10 +479,10 @@ fn energy_guard(
     if !(gain(&p) > ENERGY_GAIN_ALLOWED * scale + 1e-12) {
         return p;
     }
-    stats.failures.push((
-        m as u32,
+    stats.record_failure(
+        m,
         format!("solution added {:.3e} J of kinetic energy", gain(&p)),
-    ));
+    );
     let safe = solve_normal_rows(a, m, &vel, findex).unwrap_or_else(|| vec![0.0; m]);
     if gain(&safe) > ENERGY_GAIN_ALLOWED * scale + 1e-12 {
         // Even the safe solve failed numerically: apply nothing this step.
