@@ -7,7 +7,10 @@
 #      ranks + render, like the thesis's 4 PCs + SGI), below 5 every rank
 #      computes; at 10 Hz (dt = 0.01 s, the thesis) and at 60 Hz (dt = frame
 #      = 1/60 s);
-#   3. heterogeneous ranks: 3 ranks with worker 2 slowed 3x (--slow-rank).
+#   3. heterogeneous ranks: 3 ranks with worker 2 slowed 3x (--slow-rank);
+#   4. real cores: bench/scenes/eight_stacks.toml (--no-sleep, no render) on
+#      1 rank and on as many ranks as there are cores (CORE_RANKS), never
+#      oversubscribed: what distributing gains.
 # Then bench/tools turns the summaries into CSV, Markdown and PNG under
 # bench/results/<machine>/ (BENCH_MACHINE, default <host>-<cores>cpu).
 #
@@ -120,6 +123,14 @@ for rep in $(seq 1 "$REPS"); do
     run hetero "$n" 3 slow "$rep" "$(scene "$n" 10)" --no-render --slow-rank 2=3.0
     run hetero "$n" 3 even_force "$rep" "$(scene "$n" 10)" --no-render --force-distribute
     run hetero "$n" 3 slow_force "$rep" "$(scene "$n" 10)" --no-render --force-distribute --slow-rank 2=3.0
+  done
+done
+
+echo "bench_scaling: real cores"
+CORE_RANKS=${CORE_RANKS:-$(nproc)}
+for rep in $(seq 1 "$REPS"); do
+  for r in $(printf '%s\n' 1 "$CORE_RANKS" | sort -un); do
+    run cores 121 "$r" compute "$rep" bench/scenes/eight_stacks.toml --no-render --no-sleep
   done
 done
 

@@ -93,6 +93,7 @@ fn main() {
     load_profile(&runs, &out, &mut md);
     scaling(&runs, &out, &mut md);
     hetero(&runs, &out, &mut md);
+    real_cores(&runs, &out, &mut md);
     if !missing.is_empty() {
         let _ = writeln!(
             md,
@@ -573,6 +574,64 @@ fn scaling(runs: &[Run], out: &Path, md: &mut String) {
     ) {
         eprintln!("report: {e}");
     }
+}
+
+/// Series `cores`: `bench/scenes/eight_stacks.toml` (heavy contact solves,
+/// few impact events) on 1 rank and on as many ranks as the machine has
+/// cores, without rendering: what distributing gains where no rank shares a
+/// core. Medians per rank count; the state hash must agree.
+fn real_cores(runs: &[Run], out: &Path, md: &mut String) {
+    let rs: Vec<&Run> = runs.iter().filter(|r| r.series == "cores").collect();
+    if rs.is_empty() {
+        return;
+    }
+    let mut by: BTreeMap<u32, Vec<&Run>> = BTreeMap::new();
+    for r in &rs {
+        by.entry(r.ranks).or_default().push(r);
+    }
+    let hashes: std::collections::BTreeSet<&str> = rs
+        .iter()
+        .filter_map(|r| r.s["state_hash"].as_str())
+        .collect();
+    let mut csv = String::from(
+        "ranks,runs,wall_median_s,worst_frame_median_s,solve_islands_median_s,solve_distributed_share\n",
+    );
+    md.push_str(
+        "## Distribution on real cores: eight stacks of 15 boxes, `--no-sleep`, no rendering\n\n",
+    );
+    md.push_str("| ranks | runs | wall [s] | worst frame [ms] | solve_islands [s] | solves distributed |\n|---|---|---|---|---|---|\n");
+    for (ranks, rs) in &by {
+        let m = |g: &dyn Fn(&Value) -> f64| median(&rs.iter().map(|r| g(&r.s)).collect::<Vec<_>>());
+        let wall = m(&|s| f(s, &["wall_time_s"]));
+        let worst = m(&|s| f(s, &["worst_frame_s"]));
+        let solve = m(&|s| f(s, &["stage_seconds", "solve_islands"]));
+        let share = m(&|s| {
+            let d = f(s, &["distributed", "solve_distributed"]);
+            d / (d + f(s, &["distributed", "solve_local"])).max(1.0)
+        });
+        let _ = writeln!(
+            csv,
+            "{ranks},{},{wall:e},{worst:e},{solve:e},{share:.4}",
+            rs.len()
+        );
+        let _ = writeln!(
+            md,
+            "| {ranks} | {} | {wall:.3} | {:.1} | {solve:.3} | {:.0} % |",
+            rs.len(),
+            worst * 1e3,
+            share * 100.0
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nState hashes: {} (must be one).\n",
+        if hashes.len() == 1 {
+            "all equal"
+        } else {
+            "DIFFER"
+        }
+    );
+    std::fs::write(out.join("cores.csv"), csv).expect("write cores.csv");
 }
 
 fn hetero(runs: &[Run], out: &Path, md: &mut String) {
