@@ -573,11 +573,12 @@ impl World {
         proxies
     }
 
-    /// Pairs touching at the step's start whose every contact point
-    /// separates after the contact solve (relative normal velocity > 0), with
-    /// the contact normal (out of b towards a). SPEC 2.6 does not test such
-    /// pairs in the next frame; here they get a cheaper test that can only
-    /// skip when it proves the pair apart (`narrowphase_skipping_separating`).
+    /// Of the given touching pairs (at the step's start, or at an impact),
+    /// those whose every contact point separates at the velocities in `seg`
+    /// (relative normal velocity > 0), with a contact normal (out of b
+    /// towards a). SPEC 2.6 does not test such pairs in the next frame; here
+    /// they get a cheaper test that can only skip when it proves the pair
+    /// apart (`narrowphase_skipping_separating`).
     fn separating_pairs(
         &self,
         touching: &[Touching],
