@@ -30,13 +30,18 @@ pub fn candidate_pairs(
     let mut order: Vec<usize> = (0..proxies.len()).collect();
     let lo = |i: usize| proxies[i].center[axis] - proxies[i].radius;
     order.sort_unstable_by(|&i, &j| lo(i).total_cmp(&lo(j)).then(i.cmp(&j)));
-    let mut open: Vec<usize> = Vec::new();
+    let starts: Vec<f64> = order.iter().map(|&i| lo(i)).collect();
     let mut pairs = Vec::new();
-    for &i in &order {
-        let start = lo(i);
-        open.retain(|&j| proxies[j].center[axis] + proxies[j].radius >= start);
+    // Each interval against the ones that start inside it (they come next in
+    // the sorted order): every overlapping pair on the axis is visited once,
+    // and nothing is scanned that does not overlap.
+    for (k, &i) in order.iter().enumerate() {
         let pi = &proxies[i];
-        for &j in &open {
+        let end = pi.center[axis] + pi.radius;
+        for (&j, &start) in order[k + 1..].iter().zip(&starts[k + 1..]) {
+            if start > end {
+                break;
+            }
             let pj = &proxies[j];
             if pi.body == pj.body {
                 continue;
@@ -49,7 +54,6 @@ pub fn candidate_pairs(
                 }
             }
         }
-        open.push(i);
     }
     pairs.sort_unstable();
     pairs.dedup();
