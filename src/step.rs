@@ -809,12 +809,18 @@ impl World {
             if t >= h {
                 return None;
             }
+            // A lower bound on the gap: V-Clip's distance over the part pairs
+            // it tested, and for the others the gap between the bodies'
+            // enclosing spheres (exact enough where conservative advancement
+            // pays: far apart).
             let gap = if r.penetrating {
                 0.0
             } else {
-                r.distance
-                    .min(narrowphase::untested_gap(&self.scene.objects, &task))
-                    .max(0.0)
+                let centres =
+                    (task.pose_a.translation.vector - task.pose_b.translation.vector).norm();
+                let spheres =
+                    centres - self.object(a).outer_radius() - self.object(b).outer_radius();
+                r.distance.min(spheres.max(0.0))
             };
             prev = t;
             t = (t + spacing.max(gap / speed)).min(h);

@@ -204,9 +204,7 @@ fn check_stack(n: usize, seconds: f64) {
     println!(
         "stack of {n}: {seconds} s, top drift {drift:.3e} m, force error {worst_force:.1e}, \
          penetration {:.1e} m, energy gain {:.1e} J, LCP failures {}",
-        w.max_penetration,
-        watch.gain,
-        w.counters.solve.failed
+        w.max_penetration, watch.gain, w.counters.solve.failed
     );
     assert!(drift <= 1e-3, "top drifted {drift:e} m");
     assert!(drift <= 1e-6, "top drifted {drift:e} m (1 µm expected)");

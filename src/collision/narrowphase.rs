@@ -186,30 +186,6 @@ pub fn separation_along(objects: &[ObjectDef], task: &PairTask, n: &Vector3<f64>
     low_a - high_b
 }
 
-/// A lower bound on the gap between the part pairs that `query_pair` does
-/// not test (their part spheres are further apart than the contact
-/// tolerance): the smallest gap between those spheres, +∞ when every part
-/// pair is tested. With the query's own `distance` it bounds the gap of the
-/// whole body pair from below.
-pub fn untested_gap(objects: &[ObjectDef], task: &PairTask) -> f64 {
-    let (oa, ob) = (
-        &objects[task.object_a as usize],
-        &objects[task.object_b as usize],
-    );
-    let mut gap = f64::INFINITY;
-    for pa in &oa.parts {
-        let ca = task.pose_a * Point3::from(pa.sphere.center);
-        for pb in &ob.parts {
-            let cb = task.pose_b * Point3::from(pb.sphere.center);
-            let g = (ca - cb).norm() - pa.sphere.radius - pb.sphere.radius;
-            if g > task.contact_tolerance {
-                gap = gap.min(g);
-            }
-        }
-    }
-    gap
-}
-
 /// V-Clip alone: `None` when a part pair overlaps, else the smallest gap.
 pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
     let (oa, ob) = (
