@@ -219,6 +219,11 @@ fn overlaps_more(r: &PairResult, carried: f64) -> bool {
     r.needs_rollback(CONTACT_TOLERANCE) && (r.contacts.is_empty() || r.depth > carried + TOI_GAP)
 }
 
+/// A body state's pose, as narrowphase takes it.
+fn pose(s: &BodyState) -> Isometry3<f64> {
+    Isometry3::from_parts(s.position.into(), s.orientation)
+}
+
 impl World {
     pub fn new(scene: Scene) -> World {
         let n = scene.bodies.len();
@@ -628,8 +633,10 @@ impl World {
             .iter()
             .map(|&(a, b)| {
                 separating.get(&(a, b)).is_some_and(|n| {
-                    let task = self.pair_task(a, b, &states[a as usize], &states[b as usize]);
-                    narrowphase::separation_along(&self.scene.objects, &task, n) > CONTACT_TOLERANCE
+                    let (a, b) = (a as usize, b as usize);
+                    let side_a = (self.object(a), &pose(&states[a]));
+                    let side_b = (self.object(b), &pose(&states[b]));
+                    narrowphase::separation_along(side_a, side_b, n) > CONTACT_TOLERANCE
                 })
             })
             .collect();
@@ -684,8 +691,8 @@ impl World {
             b: BodyId(b),
             object_a: self.bodies[a as usize].object.0,
             object_b: self.bodies[b as usize].object.0,
-            pose_a: Isometry3::from_parts(sa.position.into(), sa.orientation),
-            pose_b: Isometry3::from_parts(sb.position.into(), sb.orientation),
+            pose_a: pose(sa),
+            pose_b: pose(sb),
             warm: self.features.get(&(a, b)).cloned().unwrap_or_default(),
             contact_tolerance: CONTACT_TOLERANCE,
         }

@@ -121,8 +121,9 @@ pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
         distance: f64::INFINITY,
         ..Default::default()
     };
+    let warm = WarmStarts::of(task);
     for (ia, ib) in close_part_pairs(oa, ob, task) {
-        let prox = part_proximity(oa, ob, task, ia, ib);
+        let prox = part_proximity(oa, ob, task, &warm, (ia, ib));
         add_part_pair(&mut out, oa, ob, task, ia, ib, &prox);
     }
     out.contacts = reduce_per_normal(std::mem::take(&mut out.contacts));
@@ -162,27 +163,24 @@ fn reduce_per_normal(points: Vec<ContactPoint>) -> Vec<ContactPoint> {
 /// `min_A(n·x) − max_B(n·x)` over every part of both bodies, world
 /// direction `n`: when positive, a plane normal to `n` separates the bodies
 /// and this is a lower bound on their distance.
-pub fn separation_along(objects: &[ObjectDef], task: &PairTask, n: &Vector3<f64>) -> f64 {
-    let (oa, ob) = (
-        &objects[task.object_a as usize],
-        &objects[task.object_b as usize],
-    );
-    let (na, nb) = (
-        task.pose_a.rotation.inverse() * n,
-        task.pose_b.rotation.inverse() * n,
-    );
+pub fn separation_along(
+    (oa, pose_a): (&ObjectDef, &Isometry3<f64>),
+    (ob, pose_b): (&ObjectDef, &Isometry3<f64>),
+    n: &Vector3<f64>,
+) -> f64 {
+    let (na, nb) = (pose_a.rotation.inverse() * n, pose_b.rotation.inverse() * n);
     let low_a = oa
         .parts
         .iter()
         .map(|p| p.hull.support(&-na).dot(&na))
         .fold(f64::INFINITY, f64::min)
-        + n.dot(&task.pose_a.translation.vector);
+        + n.dot(&pose_a.translation.vector);
     let high_b = ob
         .parts
         .iter()
         .map(|p| p.hull.support(&nb).dot(&nb))
         .fold(f64::NEG_INFINITY, f64::max)
-        + n.dot(&task.pose_b.translation.vector);
+        + n.dot(&pose_b.translation.vector);
     low_a - high_b
 }
 
@@ -192,9 +190,10 @@ pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
     );
+    let warm = WarmStarts::of(task);
     let mut gap = f64::INFINITY;
-    for (ia, ib) in close_part_pairs(oa, ob, task) {
-        let prox = part_proximity(oa, ob, task, ia, ib);
+    for pair in close_part_pairs(oa, ob, task) {
+        let prox = part_proximity(oa, ob, task, &warm, pair);
         if prox.penetrating {
             return None;
         }
@@ -204,50 +203,73 @@ pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
 }
 
 /// Part pairs whose part spheres come within the contact tolerance.
-fn close_part_pairs<'a>(
-    oa: &'a ObjectDef,
-    ob: &'a ObjectDef,
-    task: &'a PairTask,
-) -> impl Iterator<Item = (usize, usize)> + 'a {
-    let margin = task.contact_tolerance;
+fn close_part_pairs(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask) -> Vec<(usize, usize)> {
     let centres_b: Vec<Point3<f64>> = ob
         .parts
         .iter()
         .map(|pb| task.pose_b * Point3::from(pb.sphere.center))
         .collect();
-    oa.parts.iter().enumerate().flat_map(move |(ia, pa)| {
+    let mut close = Vec::new();
+    for (ia, pa) in oa.parts.iter().enumerate() {
         let ca = task.pose_a * Point3::from(pa.sphere.center);
-        let centres_b = centres_b.clone();
-        ob.parts.iter().enumerate().filter_map(move |(ib, pb)| {
-            let reach = pa.sphere.radius + pb.sphere.radius + margin;
-            ((ca - centres_b[ib]).norm_squared() <= reach * reach).then_some((ia, ib))
-        })
-    })
+        for (ib, (pb, cb)) in ob.parts.iter().zip(&centres_b).enumerate() {
+            let reach = pa.sphere.radius + pb.sphere.radius + task.contact_tolerance;
+            if (ca - cb).norm_squared() <= reach * reach {
+                close.push((ia, ib));
+            }
+        }
+    }
+    close
 }
 
-/// V-Clip on one part pair, from its cached features. The cache lists part
-/// pairs in order (as `query_pair` writes it), so a binary search finds one.
+/// A task's cached features, looked up by part pair. `query_pair` writes
+/// them in part-pair order, so a binary search finds one; whether they are in
+/// order is checked once per query, not once per part pair.
+struct WarmStarts<'a> {
+    cache: &'a [CachedFeatures],
+    sorted: bool,
+}
+
+impl<'a> WarmStarts<'a> {
+    fn of(task: &'a PairTask) -> Self {
+        WarmStarts {
+            cache: &task.warm,
+            sorted: task.warm.is_sorted_by_key(|c| (c.part_a, c.part_b)),
+        }
+    }
+
+    fn get(&self, ia: usize, ib: usize) -> Option<FeaturePair> {
+        let key = (ia as u16, ib as u16);
+        if self.sorted {
+            self.cache
+                .binary_search_by_key(&key, |c| (c.part_a, c.part_b))
+                .ok()
+                .map(|k| self.cache[k].features)
+        } else {
+            self.cache
+                .iter()
+                .find(|c| (c.part_a, c.part_b) == key)
+                .map(|c| c.features)
+        }
+    }
+}
+
+/// V-Clip on one part pair, from its cached features.
 fn part_proximity(
     oa: &ObjectDef,
     ob: &ObjectDef,
     task: &PairTask,
-    ia: usize,
-    ib: usize,
+    warm: &WarmStarts,
+    (ia, ib): (usize, usize),
 ) -> Proximity {
-    let key = (ia as u16, ib as u16);
-    let warm = if task.warm.is_sorted_by_key(|c| (c.part_a, c.part_b)) {
-        task.warm
-            .binary_search_by_key(&key, |c| (c.part_a, c.part_b))
-            .ok()
-            .map(|k| task.warm[k].features)
-    } else {
-        task.warm
-            .iter()
-            .find(|c| (c.part_a, c.part_b) == key)
-            .map(|c| c.features)
-    };
     let (pa, pb) = (&oa.parts[ia], &ob.parts[ib]);
-    vclip::closest_features(&pa.hull, &task.pose_a, &pb.hull, &task.pose_b, warm)
+    vclip::closest_features(
+        &pa.hull,
+        &task.pose_a,
+        &pb.hull,
+        &task.pose_b,
+        warm.get(ia, ib),
+    )
 }
 
 /// Adds one part pair's proximity, and its contact points when touching,
