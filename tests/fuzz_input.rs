@@ -11,10 +11,12 @@
 //! documented measure, recomputed here independently) or an error, never
 //! NaN. Seeds are fixed so CI is repeatable; `FUZZ_CASES=N` runs more.
 
+mod common;
+
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
-use rigidsim::contact::lcp::{self, LcpProblem, LcpSolution};
+use rigidsim::contact::lcp::{self, LcpProblem};
 use rigidsim::scene::{self, MAX_BODIES, MAX_SCENE_BYTES};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -531,51 +533,6 @@ proptest! {
 
 // ------------------------------------------------------------------ LCP
 
-/// Independent check of a solution (as in tests/lcp.rs): w = A x + b,
-/// bounds (friction bounds from x), and the complementarity conditions,
-/// each scaled by σ_i = |b_i| + Σ_j |A_ij x_j| and X = max |x|.
-fn violation(p: &LcpProblem, sol: &LcpSolution) -> Result<f64, String> {
-    let n = p.size();
-    if sol.x.len() != n || sol.w.len() != n {
-        return Err("wrong solution size".into());
-    }
-    if !sol.x.iter().chain(&sol.w).all(|v| v.is_finite()) {
-        return Err("NaN or infinity in the solution".into());
-    }
-    let xs = sol.x.iter().fold(f64::MIN_POSITIVE, |m, v| m.max(v.abs()));
-    let mut worst = 0.0f64;
-    for i in 0..n {
-        let mut w = p.b[i];
-        let mut s = p.b[i].abs();
-        for j in 0..n {
-            w += p.a[i * n + j] * sol.x[j];
-            s += (p.a[i * n + j] * sol.x[j]).abs();
-        }
-        if (w - sol.w[i]).abs() > 1e-12 * s.max(f64::MIN_POSITIVE) {
-            return Err(format!("w[{i}] = {} but A x + b = {w}", sol.w[i]));
-        }
-        let (mut lo, mut hi) = (
-            p.lo.get(i).copied().unwrap_or(0.0),
-            p.hi.get(i).copied().unwrap_or(f64::INFINITY),
-        );
-        if let Some(Some(j)) = p.findex.get(i) {
-            lo *= sol.x[*j].abs();
-            hi *= sol.x[*j].abs();
-        }
-        let x = sol.x[i];
-        worst = worst.max((lo - x).max(x - hi).max(0.0) / xs);
-        if lo < hi && w != 0.0 {
-            let c = if w > 0.0 {
-                (w / s).min((x - lo) / xs)
-            } else {
-                (-w / s).min((hi - x) / xs)
-            };
-            worst = worst.max(c);
-        }
-    }
-    Ok(worst)
-}
-
 /// Families of matrices the contact solver can meet, and worse.
 #[derive(Clone, Copy, Debug)]
 enum Family {
@@ -731,7 +688,7 @@ proptest! {
         prop_assert!(started.elapsed() < Duration::from_secs(1), "{:?}: took {:?}", case.family, started.elapsed());
         match result {
             Ok(sol) => {
-                let v = violation(&p, &sol).map_err(|e| TestCaseError::fail(format!("{:?}: {e}", case.family)))?;
+                let v = common::lcp_violation(&p, &sol).map_err(|e| TestCaseError::fail(format!("{:?}: {e}", case.family)))?;
                 prop_assert!(v <= 1e-9, "{:?}: violation {:e} (solver said {:e})", case.family, v, sol.max_violation);
             }
             Err(e) => {
@@ -750,7 +707,7 @@ proptest! {
         let p = LcpProblem::standard(&case.a, &case.b);
         match lcp::solve(&p) {
             Ok(sol) => {
-                let v = violation(&p, &sol).map_err(TestCaseError::fail)?;
+                let v = common::lcp_violation(&p, &sol).map_err(TestCaseError::fail)?;
                 prop_assert!(v <= 1e-9, "{:?}: violation {:e}", case.family, v);
             }
             Err(e) => prop_assert!(!e.to_string().is_empty()),
@@ -790,7 +747,7 @@ fn lcp_outcome_census() {
         match lcp::solve(&p) {
             Ok(sol) => {
                 t[0] += 1;
-                worst = worst.max(violation(&p, &sol).unwrap());
+                worst = worst.max(common::lcp_violation(&p, &sol).unwrap());
             }
             Err(lcp::LcpError::Infeasible { .. }) => t[1] += 1,
             Err(_) => t[2] += 1,

@@ -4,6 +4,8 @@
 //! convex QP optimum (for PSD A, the LCP w = A x + b ≥ 0, x ≥ 0, xᵀw = 0 is the
 //! KKT system of min ½xᵀAx + bᵀx s.t. x ≥ 0, so the objectives must agree).
 
+mod common;
+
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use proptest::prelude::*;
 use rigidsim::contact::lcp::{
@@ -48,46 +50,7 @@ fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
 /// and the three complementarity conditions, each scaled as documented in the
 /// module (σ_i = |b_i| + Σ|A_ij x_j|, X = max|x|). Returns the worst violation.
 fn violation(p: &LcpProblem, sol: &LcpSolution) -> f64 {
-    let n = p.size();
-    assert_eq!(sol.x.len(), n);
-    assert!(
-        sol.x.iter().chain(&sol.w).all(|v| v.is_finite()),
-        "NaN or ∞ in solution"
-    );
-    let xs = sol.x.iter().fold(f64::MIN_POSITIVE, |m, v| m.max(v.abs()));
-    let mut worst = 0.0f64;
-    for i in 0..n {
-        let mut w = p.b[i];
-        let mut s = p.b[i].abs();
-        for j in 0..n {
-            w += p.a[i * n + j] * sol.x[j];
-            s += (p.a[i * n + j] * sol.x[j]).abs();
-        }
-        assert!(
-            (w - sol.w[i]).abs() <= 1e-12 * s,
-            "w[{i}] = {} but A x + b = {w}",
-            sol.w[i]
-        );
-        let (mut lo, mut hi) = (
-            p.lo.get(i).copied().unwrap_or(0.0),
-            p.hi.get(i).copied().unwrap_or(f64::INFINITY),
-        );
-        if let Some(Some(j)) = p.findex.get(i) {
-            lo *= sol.x[*j].abs();
-            hi *= sol.x[*j].abs();
-        }
-        let x = sol.x[i];
-        worst = worst.max((lo - x).max(x - hi).max(0.0) / xs);
-        if lo < hi && w != 0.0 {
-            let c = if w > 0.0 {
-                (w / s).min((x - lo) / xs)
-            } else {
-                (-w / s).min((hi - x) / xs)
-            };
-            worst = worst.max(c);
-        }
-    }
-    worst
+    common::lcp_violation(p, sol).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn assert_valid(p: &LcpProblem, sol: &LcpSolution) {

@@ -1,6 +1,7 @@
 //! Shared helpers for the physics tests: scenes from TOML text, stepping.
 #![allow(dead_code)]
 
+use rigidsim::contact::lcp::{LcpProblem, LcpSolution};
 use rigidsim::scene;
 use rigidsim::step::{Inline, World};
 use std::path::Path;
@@ -30,3 +31,49 @@ object = "floor"
 position = [0.0, 0.0, -0.1]
 fixed = true
 "#;
+
+/// Independent check of an LCP solution (tests/lcp.rs, tests/fuzz_input.rs):
+/// w = A x + b,
+/// bounds (friction bounds from x), and the complementarity conditions,
+/// each scaled by σ_i = |b_i| + Σ_j |A_ij x_j| and X = max |x|.
+pub fn lcp_violation(p: &LcpProblem, sol: &LcpSolution) -> Result<f64, String> {
+    let n = p.size();
+    if sol.x.len() != n || sol.w.len() != n {
+        return Err("wrong solution size".into());
+    }
+    if !sol.x.iter().chain(&sol.w).all(|v| v.is_finite()) {
+        return Err("NaN or infinity in the solution".into());
+    }
+    let xs = sol.x.iter().fold(f64::MIN_POSITIVE, |m, v| m.max(v.abs()));
+    let mut worst = 0.0f64;
+    for i in 0..n {
+        let mut w = p.b[i];
+        let mut s = p.b[i].abs();
+        for j in 0..n {
+            w += p.a[i * n + j] * sol.x[j];
+            s += (p.a[i * n + j] * sol.x[j]).abs();
+        }
+        if (w - sol.w[i]).abs() > 1e-12 * s {
+            return Err(format!("w[{i}] = {} but A x + b = {w}", sol.w[i]));
+        }
+        let (mut lo, mut hi) = (
+            p.lo.get(i).copied().unwrap_or(0.0),
+            p.hi.get(i).copied().unwrap_or(f64::INFINITY),
+        );
+        if let Some(Some(j)) = p.findex.get(i) {
+            lo *= sol.x[*j].abs();
+            hi *= sol.x[*j].abs();
+        }
+        let x = sol.x[i];
+        worst = worst.max((lo - x).max(x - hi).max(0.0) / xs);
+        if lo < hi && w != 0.0 {
+            let c = if w > 0.0 {
+                (w / s).min((x - lo) / xs)
+            } else {
+                (-w / s).min((hi - x) / xs)
+            };
+            worst = worst.max(c);
+        }
+    }
+    Ok(worst)
+}
