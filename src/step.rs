@@ -94,8 +94,14 @@ pub const SLEEP_LINEAR: f64 = 5e-3;
 pub const SLEEP_ANGULAR: f64 = 5e-2;
 /// Time-of-impact bisection stops once the gap is below this (metres).
 pub const TOI_GAP: f64 = 0.01 * CONTACT_TOLERANCE;
-/// A step that needs more impact events than this accepts the overlap left.
-pub const MAX_EVENTS_PER_STEP: usize = 256;
+/// Impact events a step may take before it accepts the overlaps left: at
+/// least `MIN_EVENTS_PER_STEP`, and `EVENTS_PER_MOVING_BODY` for each moving
+/// body. An event re-solves one contact island, so its cost does not grow
+/// with the scene, while the number of impacts in a step does: 1000 nuts
+/// and bolts landing take up to 733 events in a step, and the old fixed
+/// budget of 256 left 4644 overlaps up to 4.6 cm deep in the first 0.6 s.
+pub const MIN_EVENTS_PER_STEP: usize = 256;
+pub const EVENTS_PER_MOVING_BODY: usize = 4;
 
 /// Wall seconds per stage (summary's `stage_seconds`).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -377,6 +383,7 @@ impl World {
         let mut accepted: Vec<(u32, u32)> = Vec::new();
         let mut last_event: Option<((u32, u32), f64)> = None;
         let mut toi_cache: HashMap<(u32, u32), Option<f64>> = HashMap::new();
+        let budget = MIN_EVENTS_PER_STEP.max(EVENTS_PER_MOVING_BODY * all_moving.len());
         loop {
             let violation = self.earliest_impact(
                 &pairs,
@@ -388,7 +395,7 @@ impl World {
                 &carried,
             );
             let Some((pair, tau)) = violation else { break };
-            if events >= MAX_EVENTS_PER_STEP || last_event == Some((pair, tau)) {
+            if events >= budget || last_event == Some((pair, tau)) {
                 // No progress: keep the small overlap rather than stall the step.
                 accepted.push(pair);
                 self.counters.overlaps_accepted += 1;
@@ -396,11 +403,7 @@ impl World {
             }
             last_event = Some((pair, tau));
             events += 1;
-            let group = self.impact_group(pair, &pairs);
-            let mut in_group = vec![false; n];
-            for &i in &group {
-                in_group[i] = true;
-            }
+            let (group, group_pairs, at_tau) = self.impact_group(exec, pair, tau, &pairs, &seg);
             // Roll the group back to τ (re-integrating from its segment start).
             for &i in &group {
                 let state = self.integrate_segment(i, &seg[i], tau - seg[i].time);
@@ -413,13 +416,6 @@ impl World {
                     seg[i].torque = t;
                 }
             }
-            // Contacts at τ among the group and what it touches.
-            let group_pairs: Vec<(u32, u32)> = pairs
-                .iter()
-                .copied()
-                .filter(|&(a, b)| in_group[a as usize] || in_group[b as usize])
-                .collect();
-            let at_tau = self.narrowphase_at(exec, &group_pairs, &end);
             for (k, r) in group_pairs.iter().zip(&at_tau) {
                 carried.insert(*k, if r.penetrating { r.depth } else { 0.0 });
             }
@@ -671,11 +667,19 @@ impl World {
         pairs: &[(u32, u32)],
         states: &[BodyState],
     ) -> Vec<PairResult> {
-        let clock = Instant::now();
         let tasks: Vec<PairTask> = pairs
             .iter()
             .map(|&(a, b)| self.pair_task(a, b, &states[a as usize], &states[b as usize]))
             .collect();
+        self.narrowphase_tasks(exec, tasks)
+    }
+
+    fn narrowphase_tasks(
+        &mut self,
+        exec: &mut dyn Executor,
+        tasks: Vec<PairTask>,
+    ) -> Vec<PairResult> {
+        let clock = Instant::now();
         self.counters.pair_tests += tasks.len() as u64;
         let results = exec.narrowphase(&self.scene.objects, tasks);
         for r in &results {
@@ -1004,35 +1008,90 @@ impl World {
         (va - vb).norm() + wa + wb
     }
 
-    /// Bodies that must roll back with an impact of `pair`: the moving bodies
-    /// connected to it through candidate pairs. Bodies outside the group
-    /// cannot touch it during the rest of the step and keep their motion.
-    fn impact_group(&self, pair: (u32, u32), pairs: &[(u32, u32)]) -> Vec<usize> {
+    /// Bodies that must roll back with an impact of `pair` at τ: the pair's
+    /// moving bodies and every moving body in contact with them at τ, and so
+    /// on (the contact island at τ, which the impact's LCP must hold whole).
+    /// Found outwards from the pair, querying each candidate pair of a member
+    /// at τ; returns the members (sorted), every pair queried (each pair of
+    /// a member) and its result at τ.
+    ///
+    /// Every other body keeps its path: none touches the group at τ, and
+    /// where the group's new paths reach one later in the step, that pair's
+    /// own time of impact (recomputed from τ for every pair of a member)
+    /// makes it an event of its own. Events therefore stay in time order,
+    /// and an impact in a pile re-solves its contact island only, not every
+    /// body whose swept spheres chain to it (in a pour of 1000 that chain
+    /// held about half of the bodies).
+    fn impact_group(
+        &mut self,
+        exec: &mut dyn Executor,
+        pair: (u32, u32),
+        tau: f64,
+        pairs: &[(u32, u32)],
+        seg: &[Segment],
+    ) -> (Vec<usize>, Vec<(u32, u32)>, Vec<PairResult>) {
+        let n = self.bodies.len();
+        let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for &(a, b) in pairs {
+            neighbours[a as usize].push(b);
+            neighbours[b as usize].push(a);
+        }
+        let mut in_group = vec![false; n];
         let mut group: Vec<usize> = Vec::new();
-        let mut in_group = vec![false; self.bodies.len()];
-        let mut stack: Vec<usize> = [pair.0 as usize, pair.1 as usize]
+        let mut frontier: Vec<usize> = [pair.0 as usize, pair.1 as usize]
             .into_iter()
             .filter(|&i| self.moving(i))
             .collect();
-        let mut adjacency: HashMap<usize, Vec<usize>> = HashMap::new();
-        for &(a, b) in pairs {
-            adjacency.entry(a as usize).or_default().push(b as usize);
-            adjacency.entry(b as usize).or_default().push(a as usize);
-        }
-        while let Some(i) = stack.pop() {
-            if in_group[i] {
-                continue;
+        frontier.dedup();
+        let mut at_tau: HashMap<usize, BodyState> = HashMap::new();
+        let mut queried: std::collections::HashSet<(u32, u32)> = Default::default();
+        let (mut group_pairs, mut results) = (Vec::new(), Vec::new());
+        while !frontier.is_empty() {
+            for &i in &frontier {
+                in_group[i] = true;
+                group.push(i);
             }
-            in_group[i] = true;
-            group.push(i);
-            for &j in adjacency.get(&i).map(Vec::as_slice).unwrap_or(&[]) {
-                if self.moving(j) && !in_group[j] {
-                    stack.push(j);
+            // This layer's pairs, each once, in a fixed order.
+            let mut layer: Vec<(u32, u32)> = Vec::new();
+            for &i in &frontier {
+                for &j in &neighbours[i] {
+                    let k = ((i as u32).min(j), (i as u32).max(j));
+                    if queried.insert(k) {
+                        layer.push(k);
+                    }
                 }
             }
+            let mut state = |i: usize| {
+                *at_tau
+                    .entry(i)
+                    .or_insert_with(|| self.integrate_segment(i, &seg[i], tau - seg[i].time))
+            };
+            let tasks: Vec<PairTask> = layer
+                .iter()
+                .map(|&(a, b)| {
+                    let (sa, sb) = (state(a as usize), state(b as usize));
+                    self.pair_task(a, b, &sa, &sb)
+                })
+                .collect();
+            let layer_results = self.narrowphase_tasks(exec, tasks);
+            let mut next: Vec<usize> = Vec::new();
+            for (&(a, b), r) in layer.iter().zip(&layer_results) {
+                if r.contacts.is_empty() && !r.penetrating {
+                    continue;
+                }
+                for j in [a as usize, b as usize] {
+                    if !in_group[j] && self.moving(j) && !next.contains(&j) {
+                        next.push(j);
+                    }
+                }
+            }
+            next.sort_unstable();
+            group_pairs.extend(layer);
+            results.extend(layer_results);
+            frontier = next;
         }
         group.sort_unstable();
-        group
+        (group, group_pairs, results)
     }
 
     /// Islands of the given contacts, solved; applies impulses to the segment

@@ -1302,6 +1302,16 @@ fn random_scene_sweep() {
         let bodies = strategy.new_tree(&mut runner).unwrap().current();
         match run_random_scene(&bodies) {
             Some(o) => {
+                if std::env::var_os("STRESS_SWEEP_VERBOSE").is_some() {
+                    println!(
+                        "scene {}: penetration {:.3e} m, {} events, {} accepted, first over 10 µm at {:?}",
+                        outcomes.len() + refused,
+                        o.penetration,
+                        o.toi_events,
+                        o.accepted,
+                        o.first_over
+                    );
+                }
                 let r = o.rise / o.scale;
                 if worst.as_ref().is_none_or(|(w, _)| r > *w) {
                     worst = Some((r, bodies.clone()));
