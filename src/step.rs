@@ -88,6 +88,39 @@ impl Executor for Inline {
     }
 }
 
+/// Which bodies got their segment's forces from one contact solve (an
+/// island of two or more moving bodies), as of the latest solve of each.
+struct SolvedTogether {
+    island: Vec<usize>,
+    members: Vec<Vec<usize>>,
+}
+
+impl SolvedTogether {
+    fn new(n: usize) -> Self {
+        SolvedTogether {
+            island: vec![usize::MAX; n],
+            members: Vec::new(),
+        }
+    }
+
+    fn record(&mut self, islands: Vec<Vec<usize>>) {
+        for bodies in islands {
+            for &i in &bodies {
+                self.island[i] = self.members.len();
+            }
+            self.members.push(bodies);
+        }
+    }
+
+    /// The bodies solved with `i` in its latest solve (itself included).
+    fn partners(&self, i: usize) -> &[usize] {
+        self.members
+            .get(self.island[i])
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
+    }
+}
+
 /// Resting-system thresholds: a system whose bodies all stay this slow for
 /// `sleep_after` seconds stops being integrated, tested and solved.
 pub const SLEEP_LINEAR: f64 = 5e-3;
@@ -347,7 +380,8 @@ impl World {
             })
             .collect();
         let all_moving: Vec<usize> = (0..n).filter(|&i| self.moving(i)).collect();
-        self.contact_phase(exec, &touching, &all_moving, &mut seg, h);
+        let mut solved_together = SolvedTogether::new(n);
+        solved_together.record(self.contact_phase(exec, &touching, &all_moving, &mut seg, h));
         self.check_states(
             seg.iter().map(|s| &s.state).enumerate(),
             "solve_islands",
@@ -403,7 +437,8 @@ impl World {
             }
             last_event = Some((pair, tau));
             events += 1;
-            let (group, group_pairs, at_tau) = self.impact_group(exec, pair, tau, &pairs, &seg);
+            let (group, group_pairs, at_tau) =
+                self.impact_group(exec, pair, tau, &pairs, &seg, &solved_together);
             // Roll the group back to τ (re-integrating from its segment start).
             for &i in &group {
                 let state = self.integrate_segment(i, &seg[i], tau - seg[i].time);
@@ -429,7 +464,13 @@ impl World {
             for &i in &members {
                 is_member[i] = true;
             }
-            self.contact_phase(exec, &touching_now, &members, &mut seg, h - tau);
+            solved_together.record(self.contact_phase(
+                exec,
+                &touching_now,
+                &members,
+                &mut seg,
+                h - tau,
+            ));
             self.check_states(
                 members.iter().map(|&i| (i, &seg[i].state)),
                 "solve_islands",
@@ -1029,6 +1070,7 @@ impl World {
         tau: f64,
         pairs: &[(u32, u32)],
         seg: &[Segment],
+        solved_together: &SolvedTogether,
     ) -> (Vec<usize>, Vec<(u32, u32)>, Vec<PairResult>) {
         let n = self.bodies.len();
         let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -1047,6 +1089,20 @@ impl World {
         let mut queried: std::collections::HashSet<(u32, u32)> = Default::default();
         let (mut group_pairs, mut results) = (Vec::new(), Vec::new());
         while !frontier.is_empty() {
+            // Bodies whose segment forces came from one contact solve hold
+            // each other's reactions: they roll back together, or one keeps
+            // a force whose reaction the other no longer has (momentum
+            // appears from nowhere).
+            let mut k = 0;
+            while k < frontier.len() {
+                for &j in solved_together.partners(frontier[k]) {
+                    if !in_group[j] && self.moving(j) && !frontier.contains(&j) {
+                        frontier.push(j);
+                    }
+                }
+                k += 1;
+            }
+            frontier.sort_unstable();
             for &i in &frontier {
                 in_group[i] = true;
                 group.push(i);
@@ -1103,7 +1159,7 @@ impl World {
         members: &[usize],
         seg: &mut [Segment],
         h: f64,
-    ) {
+    ) -> Vec<Vec<usize>> {
         let clock = Instant::now();
         let n = self.bodies.len();
         let links: Vec<(BodyId, BodyId)> = touching.iter().map(|t| (t.a, t.b)).collect();
@@ -1229,6 +1285,11 @@ impl World {
             }
         }
         self.stage.solve_islands += clock.elapsed().as_secs_f64();
+        islands
+            .iter()
+            .filter(|(bodies, _)| bodies.len() > 1)
+            .map(|(bodies, _)| bodies.iter().map(|b| b.index()).collect())
+            .collect()
     }
 
     fn wake_group(&mut self, group: u32) -> Vec<usize> {
