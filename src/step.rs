@@ -836,7 +836,19 @@ impl World {
             .position;
         let pa1 = self.integrate_segment(a, &seg[a], h - seg[a].time).position;
         let pb1 = self.integrate_segment(b, &seg[b], h - seg[b].time).position;
-        let travel = ((pa1 - pa0) - (pb1 - pb0)).norm();
+        // Relative travel of the centres, plus how far each body's corners
+        // can swing about its centre: a spinning body whose centre barely
+        // moves can still sweep a corner through a thin neighbour (a random
+        // scene lost 10 mm that way between two samples of a pair that was
+        // never sampled).
+        let swing = |i: usize| -> f64 {
+            [start, h]
+                .into_iter()
+                .map(|t| self.spin_bound(i, seg, t))
+                .fold(0.0, f64::max)
+                * self.object(i).outer_radius()
+        };
+        let travel = ((pa1 - pa0) - (pb1 - pb0)).norm() + (swing(a) + swing(b)) * (h - start);
         let thickness = self
             .object(a)
             .min_thickness
@@ -879,6 +891,21 @@ impl World {
         }
     }
 
+    /// Upper bound of body `i`'s angular speed at time `t`: |L| / I_min
+    /// (|ω| itself may peak inside a segment as a body wobbles; |L| cannot).
+    fn spin_bound(&self, i: usize, seg: &[Segment], t: f64) -> f64 {
+        match self.bodies[i].kind {
+            BodyKind::Dynamic => {
+                let s = self.integrate_segment(i, &seg[i], t - seg[i].time);
+                s.angular_momentum.norm() / self.object(i).principal_moments.min()
+            }
+            BodyKind::Fixed => 0.0,
+            BodyKind::Driven {
+                angular_velocity, ..
+            } => angular_velocity.norm(),
+        }
+    }
+
     /// Upper bound of the speed at which any point of `a` approaches any
     /// point of `b` between `t0` and `t1`: relative linear speed plus each
     /// body's largest angular speed |L| / I_min times its outer radius. With
@@ -888,15 +915,10 @@ impl World {
         let at = |t: f64| {
             let angular = |i: usize| {
                 let s = self.integrate_segment(i, &seg[i], t - seg[i].time);
-                let o = self.object(i);
-                let w = match self.bodies[i].kind {
-                    BodyKind::Dynamic => s.angular_momentum.norm() / o.principal_moments.min(),
-                    BodyKind::Fixed => 0.0,
-                    BodyKind::Driven {
-                        angular_velocity, ..
-                    } => angular_velocity.norm(),
-                };
-                (s.velocity, w * o.outer_radius())
+                (
+                    s.velocity,
+                    self.spin_bound(i, seg, t) * self.object(i).outer_radius(),
+                )
             };
             let ((va, wa), (vb, wb)) = (angular(a), angular(b));
             (va - vb).norm() + wa + wb

@@ -616,6 +616,44 @@ fn fast_cube_does_not_tunnel_through_a_thin_wall() {
     }
 }
 
+/// A 60 cm bar spinning at 50 rad/s about its resting centre turns 0.5 rad a
+/// step; a fixed 2 cm cube sits 20 cm out at 0.25 rad, between two step ends,
+/// so the bar misses it at both. Its centre does not move, and until
+/// this was fixed only the centres' travel decided whether a pair was
+/// sampled within the step: the bar swept through the cube unseen.
+#[test]
+fn spinning_bar_does_not_sweep_through_a_small_cube() {
+    let angle: f64 = 0.25;
+    let mut w = world(&format!(
+        r#"
+        [world]
+        gravity = [0.0, 0.0, 0.0]
+        dt = 0.01
+        duration = 0.1
+        [objects.bar]
+        shape = {{ box = {{ half_extents = [0.3, 0.01, 0.01] }} }}
+        mass = 1.0
+        restitution = 0.5
+        [[bodies]]
+        object = "bar"
+        angular_velocity = [0.0, 0.0, 50.0]
+        [objects.cube]
+        shape = {{ box = {{ half_extents = [0.01, 0.01, 0.01] }} }}
+        mass = 1.0
+        [[bodies]]
+        object = "cube"
+        position = [{}, {}, 0.0]
+        fixed = true
+        "#,
+        0.2 * angle.cos(),
+        0.2 * angle.sin()
+    ));
+    w.step(&mut Inline::default()).unwrap();
+    let spin = w.bodies[0].angular_velocity(w.object(0)).z;
+    assert!(spin < 50.0 - 1.0, "the bar kept spinning at {spin} rad/s");
+    assert!(w.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE);
+}
+
 #[test]
 fn force_window_gives_the_exact_impulse() {
     let mut w = world(

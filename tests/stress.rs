@@ -1327,16 +1327,25 @@ fn random_scene_sweep() {
     let mut worst: Option<(f64, Vec<RandomBody>)> = None;
     for _ in 0..n {
         let bodies = strategy.new_tree(&mut runner).unwrap().current();
+        // STRESS_SWEEP_SCENE=k writes scene k (as numbered by
+        // STRESS_SWEEP_VERBOSE) to STRESS_DUMP's folder.
+        let index = outcomes.len() + refused;
+        if let (Some(keep), Ok(k)) = (
+            std::env::var_os("STRESS_DUMP"),
+            std::env::var("STRESS_SWEEP_SCENE"),
+        ) && k.parse() == Ok(index)
+        {
+            let keep = std::path::PathBuf::from(keep);
+            std::fs::create_dir_all(&keep).unwrap();
+            let text = random_scene(&bodies, &keep);
+            std::fs::write(keep.join(format!("scene{index}.toml")), text).unwrap();
+        }
         match run_random_scene(&bodies) {
             Some(o) => {
                 if std::env::var_os("STRESS_SWEEP_VERBOSE").is_some() {
                     println!(
-                        "scene {}: penetration {:.3e} m, {} events, {} accepted, first over 10 µm at {:?}",
-                        outcomes.len() + refused,
-                        o.penetration,
-                        o.toi_events,
-                        o.accepted,
-                        o.first_over
+                        "scene {index}: penetration {:.3e} m, {} events, {} accepted, first over 10 µm at {:?}",
+                        o.penetration, o.toi_events, o.accepted, o.first_over
                     );
                 }
                 let r = o.rise / o.scale;
