@@ -8,7 +8,7 @@
 #   ONLY='stack|pyramid' scripts/stress.sh   cases whose name matches
 #   RANKS=3 scripts/stress.sh         under mpirun -np 3 (default: one rank)
 #   OUT=dir scripts/stress.sh         keep every run's outputs in dir
-#   CROWD1000=1 scripts/stress.sh     also pour 1000 nuts and bolts (hours)
+#   CROWD1000=1 scripts/stress.sh     also pour 1000 nuts and bolts (about 10 min)
 #
 # Columns: simulated and wall seconds; the largest overlap left at the end of
 # any step (contact tolerance 1e-5 m); the drift of the case's watched body
@@ -216,8 +216,8 @@ crowd 200 0.35 1.0 box >"$s/crowd200_box.toml"
 crowd 1000 0.55 1.6 >"$s/crowd1000.toml"
 run_case crowd200_floor "$s/crowd200.toml" 1 --sample-every 0.5 $( [ "$quick" = 1 ] && echo --duration 2 )
 run_case crowd200_box "$s/crowd200_box.toml" 1 --sample-every 0.5 $( [ "$quick" = 1 ] && echo --duration 2 )
-# 1000 bodies take hours at the current cost of time-of-impact events
-# (docs/stability.md): only with CROWD1000=1.
+# 1000 bodies run to rest in about 10 minutes on one core (4.3 s simulated at
+# b1cbab1, docs/stability.md): only with CROWD1000=1.
 [ "${CROWD1000:-0}" = 1 ] && run_case crowd1000_floor "$s/crowd1000.toml" 1 --sample-every 0.5
 
 echo
