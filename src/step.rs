@@ -828,27 +828,25 @@ impl World {
         h: f64,
         carried: f64,
     ) -> Option<(f64, f64)> {
-        let pa0 = self
-            .integrate_segment(a, &seg[a], start - seg[a].time)
-            .position;
-        let pb0 = self
-            .integrate_segment(b, &seg[b], start - seg[b].time)
-            .position;
-        let pa1 = self.integrate_segment(a, &seg[a], h - seg[a].time).position;
-        let pb1 = self.integrate_segment(b, &seg[b], h - seg[b].time).position;
+        // Each body at both ends of the interval: its travel, its swing and
+        // the approach-speed bound all come from these four states.
+        let ends =
+            |i: usize| [start, h].map(|t| self.integrate_segment(i, &seg[i], t - seg[i].time));
+        let (ends_a, ends_b) = (ends(a), ends(b));
         // Relative travel of the centres, plus how far each body's corners
         // can swing about its centre: a spinning body whose centre barely
         // moves can still sweep a corner through a thin neighbour (a random
         // scene lost 10 mm that way between two samples of a pair that was
         // never sampled).
-        let swing = |i: usize| -> f64 {
-            [start, h]
-                .into_iter()
-                .map(|t| self.spin_bound(i, seg, t))
+        let swing = |i: usize, ends: &[BodyState; 2]| -> f64 {
+            ends.iter()
+                .map(|s| self.spin_bound(i, s))
                 .fold(0.0, f64::max)
                 * self.object(i).outer_radius()
         };
-        let travel = ((pa1 - pa0) - (pb1 - pb0)).norm() + (swing(a) + swing(b)) * (h - start);
+        let centres =
+            (ends_a[1].position - ends_a[0].position) - (ends_b[1].position - ends_b[0].position);
+        let travel = centres.norm() + (swing(a, &ends_a) + swing(b, &ends_b)) * (h - start);
         let thickness = self
             .object(a)
             .min_thickness
@@ -862,7 +860,7 @@ impl World {
         // advancement), so nothing is skipped there either.
         let samples = ((travel / (0.5 * thickness)).ceil() as usize).min(10_000);
         let spacing = (h - start) / samples as f64;
-        let speed = self.approach_speed_bound(a, b, seg, start, h);
+        let speed = self.approach_speed_bound((a, &ends_a), (b, &ends_b));
         let mut prev = start;
         let mut t = (start + spacing).min(h);
         loop {
@@ -891,14 +889,11 @@ impl World {
         }
     }
 
-    /// Upper bound of body `i`'s angular speed at time `t`: |L| / I_min
+    /// Upper bound of body `i`'s angular speed in state `s`: |L| / I_min
     /// (|ω| itself may peak inside a segment as a body wobbles; |L| cannot).
-    fn spin_bound(&self, i: usize, seg: &[Segment], t: f64) -> f64 {
+    fn spin_bound(&self, i: usize, s: &BodyState) -> f64 {
         match self.bodies[i].kind {
-            BodyKind::Dynamic => {
-                let s = self.integrate_segment(i, &seg[i], t - seg[i].time);
-                s.angular_momentum.norm() / self.object(i).principal_moments.min()
-            }
+            BodyKind::Dynamic => s.angular_momentum.norm() / self.object(i).principal_moments.min(),
             BodyKind::Fixed => 0.0,
             BodyKind::Driven {
                 angular_velocity, ..
@@ -907,23 +902,23 @@ impl World {
     }
 
     /// Upper bound of the speed at which any point of `a` approaches any
-    /// point of `b` between `t0` and `t1`: relative linear speed plus each
-    /// body's largest angular speed |L| / I_min times its outer radius. With
-    /// force and torque constant over a segment, |v| and |L| are convex in
-    /// time and peak at its ends (|ω| itself may not, as a body wobbles).
-    fn approach_speed_bound(&self, a: usize, b: usize, seg: &[Segment], t0: f64, t1: f64) -> f64 {
-        let at = |t: f64| {
-            let angular = |i: usize| {
-                let s = self.integrate_segment(i, &seg[i], t - seg[i].time);
-                (
-                    s.velocity,
-                    self.spin_bound(i, seg, t) * self.object(i).outer_radius(),
-                )
-            };
-            let ((va, wa), (vb, wb)) = (angular(a), angular(b));
-            (va - vb).norm() + wa + wb
-        };
-        at(t0).max(at(t1)).max(1e-12)
+    /// point of `b` over an interval, from each body's states at its two
+    /// ends: relative linear speed plus each body's largest angular speed
+    /// |L| / I_min times its outer radius. With force and torque constant
+    /// over a segment, |v| and |L| are convex in time and peak at its ends
+    /// (|ω| itself may not, as a body wobbles).
+    fn approach_speed_bound(
+        &self,
+        (a, ends_a): (usize, &[BodyState; 2]),
+        (b, ends_b): (usize, &[BodyState; 2]),
+    ) -> f64 {
+        let reach = |i: usize, s: &BodyState| self.spin_bound(i, s) * self.object(i).outer_radius();
+        (0..2)
+            .map(|k| {
+                let (sa, sb) = (&ends_a[k], &ends_b[k]);
+                (sa.velocity - sb.velocity).norm() + reach(a, sa) + reach(b, sb)
+            })
+            .fold(1e-12, f64::max)
     }
 
     /// The pair at time `t`, with contact points (their depth tells an
