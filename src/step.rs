@@ -437,11 +437,11 @@ impl World {
             }
             last_event = Some((pair, tau));
             events += 1;
-            let (group, group_pairs, at_tau) =
+            let (group_states, group_pairs, at_tau) =
                 self.impact_group(exec, pair, tau, &pairs, &seg, &solved_together);
-            // Roll the group back to τ (re-integrating from its segment start).
-            for &i in &group {
-                let state = self.integrate_segment(i, &seg[i], tau - seg[i].time);
+            let group: Vec<usize> = group_states.iter().map(|&(i, _)| i).collect();
+            // Roll the group back to τ.
+            for &(i, state) in &group_states {
                 seg[i].state = state;
                 seg[i].time = tau;
                 end[i] = state;
@@ -1070,8 +1070,8 @@ impl World {
     /// moving bodies and every moving body in contact with them at τ, and so
     /// on (the contact island at τ, which the impact's LCP must hold whole).
     /// Found outwards from the pair, querying each candidate pair of a member
-    /// at τ; returns the members (sorted), every pair queried (each pair of
-    /// a member) and its result at τ.
+    /// at τ; returns the members (sorted) with their states at τ, every pair
+    /// queried (each pair of a member) and its result at τ.
     ///
     /// Every other body keeps its path: none touches the group at τ, and
     /// where the group's new paths reach one later in the step, that pair's
@@ -1088,21 +1088,29 @@ impl World {
         pairs: &[(u32, u32)],
         seg: &[Segment],
         solved_together: &SolvedTogether,
-    ) -> (Vec<usize>, Vec<(u32, u32)>, Vec<PairResult>) {
+    ) -> (Vec<(usize, BodyState)>, Vec<(u32, u32)>, Vec<PairResult>) {
         let n = self.bodies.len();
         let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
         for &(a, b) in pairs {
             neighbours[a as usize].push(b);
             neighbours[b as usize].push(a);
         }
-        let mut in_group = vec![false; n];
+        // Bodies in the group or queued for it.
+        let mut claimed = vec![false; n];
         let mut group: Vec<usize> = Vec::new();
-        let mut frontier: Vec<usize> = [pair.0 as usize, pair.1 as usize]
-            .into_iter()
-            .filter(|&i| self.moving(i))
-            .collect();
-        frontier.dedup();
+        let mut frontier: Vec<usize> = Vec::new();
+        for i in [pair.0 as usize, pair.1 as usize] {
+            if self.moving(i) && !claimed[i] {
+                claimed[i] = true;
+                frontier.push(i);
+            }
+        }
         let mut at_tau: HashMap<usize, BodyState> = HashMap::new();
+        let mut state = |world: &World, i: usize| {
+            *at_tau
+                .entry(i)
+                .or_insert_with(|| world.integrate_segment(i, &seg[i], tau - seg[i].time))
+        };
         let mut queried: std::collections::HashSet<(u32, u32)> = Default::default();
         let (mut group_pairs, mut results) = (Vec::new(), Vec::new());
         while !frontier.is_empty() {
@@ -1113,17 +1121,15 @@ impl World {
             let mut k = 0;
             while k < frontier.len() {
                 for &j in solved_together.partners(frontier[k]) {
-                    if !in_group[j] && self.moving(j) && !frontier.contains(&j) {
+                    if !claimed[j] && self.moving(j) {
+                        claimed[j] = true;
                         frontier.push(j);
                     }
                 }
                 k += 1;
             }
             frontier.sort_unstable();
-            for &i in &frontier {
-                in_group[i] = true;
-                group.push(i);
-            }
+            group.extend(&frontier);
             // This layer's pairs, each once, in a fixed order.
             let mut layer: Vec<(u32, u32)> = Vec::new();
             for &i in &frontier {
@@ -1134,15 +1140,10 @@ impl World {
                     }
                 }
             }
-            let mut state = |i: usize| {
-                *at_tau
-                    .entry(i)
-                    .or_insert_with(|| self.integrate_segment(i, &seg[i], tau - seg[i].time))
-            };
             let tasks: Vec<PairTask> = layer
                 .iter()
                 .map(|&(a, b)| {
-                    let (sa, sb) = (state(a as usize), state(b as usize));
+                    let (sa, sb) = (state(self, a as usize), state(self, b as usize));
                     self.pair_task(a, b, &sa, &sb)
                 })
                 .collect();
@@ -1153,7 +1154,8 @@ impl World {
                     continue;
                 }
                 for j in [a as usize, b as usize] {
-                    if !in_group[j] && self.moving(j) && !next.contains(&j) {
+                    if !claimed[j] && self.moving(j) {
+                        claimed[j] = true;
                         next.push(j);
                     }
                 }
@@ -1164,7 +1166,8 @@ impl World {
             frontier = next;
         }
         group.sort_unstable();
-        (group, group_pairs, results)
+        let states = group.into_iter().map(|i| (i, state(self, i))).collect();
+        (states, group_pairs, results)
     }
 
     /// Islands of the given contacts, solved; applies impulses to the segment
