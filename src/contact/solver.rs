@@ -199,6 +199,14 @@ impl Row {
             + self.ang_b.dot(&w[self.b])
     }
 
+    /// Adds the velocity change of an impulse `p` on this row to both bodies.
+    fn change_velocities(&self, p: f64, v: &mut [Vector3<f64>], w: &mut [Vector3<f64>]) {
+        v[self.a] += self.dva * p;
+        w[self.a] += self.dwa * p;
+        v[self.b] += self.dvb * p;
+        w[self.b] += self.dwb * p;
+    }
+
     /// J_self · (M⁻¹ J_other ᵀ).
     fn coupling(&self, other: &Row) -> f64 {
         let mut s = 0.0;
@@ -251,10 +259,7 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
         out.normal_impulse_sum = sum;
         for (row, &pi) in rows.iter().zip(&p) {
             apply(row, pi, &mut out.impulse, &mut out.angular_impulse);
-            v[row.a] += row.dva * pi;
-            w[row.a] += row.dwa * pi;
-            v[row.b] += row.dvb * pi;
-            w[row.b] += row.dwb * pi;
+            row.change_velocities(pi, &mut v, &mut w);
         }
     }
 
@@ -535,10 +540,7 @@ fn energy_guard(
         let (mut dv, mut dw) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
         for (row, &pi) in rows.iter().zip(x) {
             apply(row, pi, &mut lin, &mut ang);
-            dv[row.a] += row.dva * pi;
-            dw[row.a] += row.dwa * pi;
-            dv[row.b] += row.dvb * pi;
-            dw[row.b] += row.dwb * pi;
+            row.change_velocities(pi, &mut dv, &mut dw);
         }
         let e: f64 = (0..n)
             .map(|i| lin[i].dot(&(v[i] + 0.5 * dv[i])) + ang[i].dot(&(w[i] + 0.5 * dw[i])))
@@ -702,10 +704,7 @@ fn sequential_impulses(
             let new = (p[i] - wi / diag[i]).clamp(l, h);
             let delta = if new.is_finite() { new - p[i] } else { -p[i] };
             p[i] += delta;
-            dv[row.a] += row.dva * delta;
-            dw[row.a] += row.dwa * delta;
-            dv[row.b] += row.dvb * delta;
-            dw[row.b] += row.dwb * delta;
+            row.change_velocities(delta, &mut dv, &mut dw);
             change = change.max(delta.abs());
             largest = largest.max(p[i].abs());
         }
