@@ -476,8 +476,9 @@ fn resting_pile_costs_nothing_until_a_falling_body_wakes_it() {
     );
 }
 
-#[test]
-fn body_dropped_on_a_resting_pile_wakes_it() {
+/// Two 0.2 m cubes stacked on the floor, and a third dropped from 3 m,
+/// 2 cm off the stack's axis.
+fn drop_on_a_stack() -> String {
     let mut s = format!(
         r#"
         [world]
@@ -499,7 +500,12 @@ fn body_dropped_on_a_resting_pile_wakes_it() {
     );
     // A late force window lifts nothing: a dropped body comes from above.
     s.push_str("[[bodies]]\nobject = \"cube\"\nposition = [0.02, 0.0, 3.0]\n");
-    let mut w = world(&s);
+    s
+}
+
+#[test]
+fn body_dropped_on_a_resting_pile_wakes_it() {
+    let mut w = world(&drop_on_a_stack());
     let mut exec = Inline::default();
     run_until(&mut w, &mut exec, 0.6);
     assert_eq!(
@@ -538,27 +544,7 @@ fn body_dropped_on_a_resting_pile_wakes_it() {
 /// sleep threshold.
 #[test]
 fn drop_on_a_stack_keeps_horizontal_momentum_on_a_frictionless_floor() {
-    let mut s = format!(
-        r#"
-        [world]
-        dt = 0.01
-        duration = 5.0
-        {FLOOR}
-        [objects.cube]
-        shape = {{ box = {{ half_extents = [0.1, 0.1, 0.1] }} }}
-        mass = 1.0
-        restitution = 0.2
-        friction = 0.6
-        [[bodies]]
-        object = "cube"
-        position = [0.0, 0.0, 0.1]
-        [[bodies]]
-        object = "cube"
-        position = [0.0, 0.0, 0.3]
-        "#
-    );
-    s.push_str("[[bodies]]\nobject = \"cube\"\nposition = [0.02, 0.0, 3.0]\n");
-    let mut w = world(&s);
+    let mut w = world(&drop_on_a_stack());
     let mut exec = Inline::default();
     let mut worst = 0.0f64;
     while w.time() < 3.0 {
