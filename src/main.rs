@@ -9,6 +9,7 @@ use mpi::topology::Communicator;
 use mpi::traits::Root;
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
 use rigidsim::output::checkpoint::Checkpoint;
+use rigidsim::output::trajectory;
 use rigidsim::run::{self, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunError, RunOptions};
 use rigidsim::step::{Executor, Inline};
 use std::path::PathBuf;
@@ -117,11 +118,25 @@ fn main() -> ExitCode {
     // then tells every rank whether to go on, so that a refused checkpoint
     // ends all ranks alike (exit 2) before any work is handed out. Only rank 0
     // needs the file.
+    let out_dir = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| run::default_out_dir(&scene));
     let mut resume = None;
     if let Some(path) = &cli.resume {
         let mut code: i32 = 0;
         if rank == 0 {
-            match Checkpoint::read_for(path, &scene, !opts.no_sleep) {
+            // The trajectory the run will append to must be the one the
+            // checkpoint's run wrote (or missing: a new one is started).
+            let traj = out_dir.join("trajectory.csv");
+            let checked = Checkpoint::read_for(path, &scene, !opts.no_sleep)
+                .map_err(|e| e.to_string())
+                .and_then(|ck| {
+                    trajectory::check_resumable(&traj, ck.run.trajectory)
+                        .map(|()| ck)
+                        .map_err(|e| format!("{}: {e}", traj.display()))
+                });
+            match checked {
                 Ok(ck) => resume = Some(ck),
                 Err(e) => {
                     say(&format!("error: {e}"));
@@ -134,10 +149,6 @@ fn main() -> ExitCode {
             return ExitCode::from(code as u8);
         }
     }
-    let out_dir = opts
-        .out_dir
-        .clone()
-        .unwrap_or_else(|| run::default_out_dir(&scene));
     let roles = Roles::new(size, scene.settings.render.is_some());
 
     if rank != 0 {

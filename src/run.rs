@@ -6,7 +6,7 @@ use crate::body::{Activity, BodyKind};
 use crate::output::checkpoint::{self, Checkpoint, RunMarks};
 use crate::output::progress::Progress;
 use crate::output::summary::{RankSummary, Summary};
-use crate::output::trajectory::TrajectoryWriter;
+use crate::output::trajectory::{Continued, TrajectoryWriter};
 use crate::output::write_atomic;
 use crate::render;
 use crate::scene::Scene;
@@ -397,12 +397,12 @@ pub fn run_coordinator(
     let settings = scene.settings.clone();
     // The last good checkpoint: the one resumed from, then each one written.
     let mut last_good: Option<(PathBuf, f64)> = None;
-    let (mut world, marks, mut traj, traj_rows) = match resume {
+    let (mut world, marks, mut traj, continued) = match resume {
         None => {
             let mut world = World::new(scene);
             world.sleep_enabled = !opts.no_sleep;
             let traj = TrajectoryWriter::create(&traj_path).map_err(|e| io(e, "trajectory.csv"))?;
-            (world, None, traj, 0)
+            (world, None, traj, Continued::New)
         }
         Some(ck) => {
             let marks = ck.run.clone();
@@ -414,9 +414,9 @@ pub fn run_coordinator(
             ));
             last_good = Some((ck.source().to_path_buf(), time));
             let world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
-            let (traj, rows) =
-                TrajectoryWriter::resume(&traj_path, time).map_err(|e| io(e, "trajectory.csv"))?;
-            (world, Some(marks), traj, rows)
+            let (traj, continued) = TrajectoryWriter::resume(&traj_path, marks.trajectory, time)
+                .map_err(|e| io(e, &traj_path.display().to_string()))?;
+            (world, Some(marks), traj, continued)
         }
     };
     let checkpoint_path = out_dir.join(checkpoint::FILE_NAME);
@@ -448,7 +448,7 @@ pub fn run_coordinator(
     // A fresh run samples t = 0; a resumed one continues the trajectory it
     // finds (which already holds the rows up to the checkpoint) or, in a new
     // folder, starts it at the checkpoint's time.
-    if marks.is_none() || traj_rows == 0 {
+    if continued == Continued::New {
         traj.sample(world.time(), &world.bodies, &world.scene.objects)
             .map_err(|e| io(e, "trajectory.csv"))?;
     }
@@ -467,6 +467,7 @@ pub fn run_coordinator(
             ck.run = RunMarks {
                 energy_initial,
                 frame_index,
+                trajectory: traj.mark(),
             };
             ck.write(&checkpoint_path)
                 .map_err(|e| io(e, &checkpoint_path.display().to_string()))?;

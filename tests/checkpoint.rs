@@ -690,6 +690,89 @@ fn refused_resume_ends_every_rank_with_status_2() {
     }
 }
 
+/// A resumed run appends only to the trajectory its checkpoint's run wrote.
+/// In a folder holding another run's `trajectory.csv`, or that run's file
+/// cut shorter than at the checkpoint, `--resume` is refused with exit 2 by
+/// every rank, naming the file, and the file is left as it was; with the
+/// file as the checkpoint left it, the same resume runs.
+#[test]
+fn resume_refuses_a_trajectory_it_did_not_write() {
+    let _one = one_at_a_time();
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    let scene = scene_file(root, "pile.toml", SCENE);
+    let dir = root.join("a");
+    let first = [
+        s(&scene),
+        "--duration",
+        "0.3",
+        "--checkpoint-every",
+        "0.2",
+        "--out",
+        s(&dir),
+    ];
+    let r = run(1, &first);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let ck = root.join("resume-from.bin");
+    std::fs::rename(dir.join(FILE_NAME), &ck).unwrap();
+    let traj = dir.join("trajectory.csv");
+    let original = std::fs::read(&traj).unwrap();
+    // Another run's trajectory, longer than the checkpoint's: the same
+    // scene with one body fewer, run twice as long.
+    let other = scene_file(
+        root,
+        "other.toml",
+        &SCENE.replace("count = 16", "count = 15"),
+    );
+    let r = run(
+        1,
+        &[s(&other), "--duration", "0.6", "--out", s(&root.join("b"))],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let foreign = std::fs::read(root.join("b/trajectory.csv")).unwrap();
+    let header = original.iter().position(|&c| c == b'\n').unwrap() + 1;
+    let cases: [(&[u8], &str); 2] = [
+        (&foreign, "is not the file the checkpoint's run wrote"),
+        (&original[..header + 10], "is shorter"),
+    ];
+    let resume = [
+        s(&scene),
+        "--duration",
+        "0.3",
+        "--resume",
+        s(&ck),
+        "--out",
+        s(&dir),
+    ];
+    for np in [1, 2] {
+        for (content, words) in cases {
+            std::fs::write(&traj, content).unwrap();
+            let r = run(np, &resume);
+            assert_eq!(r.code, Some(2), "{np} ranks, {words}: {}", r.stderr);
+            assert!(
+                r.stderr.contains("trajectory.csv: ") && r.stderr.contains(words),
+                "{np} ranks: '{words}' not in {}",
+                r.stderr
+            );
+            assert_eq!(
+                r.stderr.matches("rigidsim: error").count(),
+                1,
+                "{}",
+                r.stderr
+            );
+            assert_eq!(
+                std::fs::read(&traj).unwrap(),
+                content,
+                "the file was changed"
+            );
+        }
+    }
+    std::fs::write(&traj, &original).unwrap();
+    let r = run(1, &resume);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert_eq!(std::fs::read(&traj).unwrap(), original);
+}
+
 // ------------------------------------------------------------ rendered runs
 
 /// `rigidsim ARGS` on one rank with rendering on (`command` turns it off).

@@ -32,7 +32,8 @@
 //! Files are written with `write_atomic` (temporary file, then rename): a run
 //! killed while writing leaves the previous checkpoint whole.
 
-use super::write_atomic;
+use super::trajectory::TrajectoryMark;
+use super::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::body::{Body, BodyId};
 use crate::collision::narrowphase::CachedFeatures;
 use crate::scene::Scene;
@@ -42,7 +43,7 @@ use std::path::{Path, PathBuf};
 
 pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// Bump when `Checkpoint` changes shape; older files are then refused by name.
-pub const FORMAT: u32 = 4;
+pub const FORMAT: u32 = 5;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";
@@ -62,6 +63,9 @@ pub struct RunMarks {
     pub energy_initial: f64,
     /// Index of the next frame published to the renderer.
     pub frame_index: u64,
+    /// What `trajectory.csv` held when the checkpoint was written: a resumed
+    /// run continues that file only if it still begins with those bytes.
+    pub trajectory: TrajectoryMark,
 }
 
 /// The full changing state of a world at the end of a step.
@@ -91,16 +95,6 @@ pub struct Checkpoint {
     #[serde(skip)]
     source: PathBuf,
 }
-
-/// FNV-1a 64 over bytes.
-fn fnv1a(h: &mut u64, bytes: &[u8]) {
-    for &b in bytes {
-        *h ^= b as u64;
-        *h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-}
-
-const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// A 64-bit fingerprint of everything in a loaded scene that changes how it
 /// steps: gravity, dt, fall height and combine rules; every object's mass
