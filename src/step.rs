@@ -32,7 +32,7 @@ use crate::output::summary::{Distribution, RankSummary};
 use crate::scene::Scene;
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
 /// Runs the distributable stages. One rank: `Inline`; several: `cluster`.
@@ -210,6 +210,22 @@ pub(crate) struct Touching {
     pub(crate) points: Vec<ContactPoint>,
 }
 
+/// The resting force one contact point held in the last solve of its pair:
+/// where (in A's body frame) and how much. The next solve of the pair starts
+/// its iterative solve from these (`IslandContact::warm_force`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(crate) struct WarmContact {
+    pub(crate) local: Vector3<f64>,
+    pub(crate) normal: f64,
+    pub(crate) friction: Vector3<f64>,
+}
+
+/// A point of a new contact takes the warm start of the nearest point of the
+/// pair's last solve within this share of A's outer radius (resting
+/// contacts move by far less than this in a step; a point farther away is a
+/// new one and starts from zero).
+const WARM_MATCH: f64 = 0.05;
+
 /// The simulated world: static scene data plus the changing state.
 pub struct World {
     pub scene: Scene,
@@ -225,6 +241,13 @@ pub struct World {
     pub sleep_after: f64,
     /// Enables the separating-pair skip (on by default; a test compares).
     pub skip_separating: bool,
+    /// Starts iterative solves from the last forces (on by default; a test
+    /// compares).
+    pub warm_start: bool,
+    /// Islands of this many rows or more are solved by sequential impulses
+    /// (`solver::ITERATIVE_MIN_ROWS`; a test lowers it to make a small
+    /// stack iterative).
+    pub iterative_min_rows: usize,
     pub(crate) touching: Vec<Touching>,
     /// Contacts of the impacts solved during the last step, for the
     /// separating-pair skip (only an optimisation: not checkpointed).
@@ -237,6 +260,8 @@ pub struct World {
     /// on each touching body pair (a, b, newtons), for tests and diagnostics.
     pub last_normal_force_sum: f64,
     pub last_pair_forces: Vec<(BodyId, BodyId, f64)>,
+    /// Resting forces of the last solve of each touching pair (warm start).
+    pub(crate) warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
 }
 
 /// A body's motion over the current step: start state at `time` (seconds into
@@ -277,6 +302,8 @@ impl World {
             sleep_enabled: true,
             sleep_after: 0.5,
             skip_separating: true,
+            warm_start: true,
+            iterative_min_rows: solver::ITERATIVE_MIN_ROWS,
             touching: Vec::new(),
             impacts: Vec::new(),
             features: HashMap::new(),
@@ -284,6 +311,7 @@ impl World {
             sleep_group: (0..n as u32).collect(),
             last_normal_force_sum: 0.0,
             last_pair_forces: Vec::new(),
+            warm: BTreeMap::new(),
         }
     }
 
@@ -529,6 +557,9 @@ impl World {
             }
         }
         self.touching = self.touching_from(&pairs, &results);
+        let touching: std::collections::BTreeSet<(BodyId, BodyId)> =
+            self.touching.iter().map(|t| (t.a, t.b)).collect();
+        self.warm.retain(|k, _| touching.contains(k));
         self.steps += 1;
         self.counters.steps += 1;
         self.check_states(
@@ -1190,7 +1221,9 @@ impl World {
         let restitution_threshold =
             0.5 * self.scene.settings.gravity.norm() * self.scene.settings.dt;
         let mut tasks = Vec::with_capacity(islands.len());
-        let mut contact_pairs: Vec<Vec<(BodyId, BodyId)>> = Vec::with_capacity(islands.len());
+        // Per island, each contact's pair and point in A's body frame.
+        let mut contact_pairs: Vec<Vec<((BodyId, BodyId), Vector3<f64>)>> =
+            Vec::with_capacity(islands.len());
         for (bodies, contact_ids) in &islands {
             let mut pairs_here = Vec::new();
             let mut index: Vec<BodyId> = bodies.clone();
@@ -1206,8 +1239,25 @@ impl World {
                 let ib = index.iter().position(|&x| x == t.b).unwrap() as u32;
                 let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
                 let rules = &self.scene.settings;
+                let frame_a = pose(&seg[t.a.index()].state).inverse();
+                let mut last = match self.warm_start {
+                    true => self.warm.get(&(t.a, t.b)).cloned().unwrap_or_default(),
+                    false => Vec::new(),
+                };
+                let reach = WARM_MATCH * oa.outer_radius();
                 for p in &t.points {
-                    pairs_here.push((t.a, t.b));
+                    let local = frame_a.transform_point(&p.point.into()).coords;
+                    // Each point of the last solve warms one new point at most.
+                    let nearest = last
+                        .iter()
+                        .enumerate()
+                        .map(|(k, w)| (k, (w.local - local).norm()))
+                        .filter(|&(_, d)| d <= reach)
+                        .min_by(|x, y| x.1.total_cmp(&y.1))
+                        .map(|(k, _)| last.swap_remove(k));
+                    let (warm_force, warm_friction) =
+                        nearest.map_or((0.0, Vector3::zeros()), |w| (w.normal, w.friction));
+                    pairs_here.push(((t.a, t.b), local));
                     contacts.push(IslandContact {
                         a: ia,
                         b: ib,
@@ -1218,6 +1268,8 @@ impl World {
                             .combine(oa.restitution, ob.restitution),
                         friction: rules.friction_rule.combine(oa.friction, ob.friction),
                         separation: p.separation,
+                        warm_force,
+                        warm_friction,
                     });
                 }
             }
@@ -1266,6 +1318,7 @@ impl World {
                 contacts,
                 dt: h,
                 restitution_threshold,
+                iterative_min_rows: self.iterative_min_rows as u32,
             });
         }
         self.counters.islands += tasks.len() as u64;
@@ -1280,8 +1333,18 @@ impl World {
         self.last_normal_force_sum = 0.0;
         let mut pair_forces: std::collections::BTreeMap<(BodyId, BodyId), f64> = Default::default();
         for (pairs, r) in contact_pairs.iter().zip(&results) {
-            for (pair, f) in pairs.iter().zip(&r.contact_force) {
+            for (pair, _) in pairs {
+                self.warm.remove(pair);
+            }
+            for (((pair, local), f), friction) in
+                pairs.iter().zip(&r.contact_force).zip(&r.contact_friction)
+            {
                 *pair_forces.entry(*pair).or_default() += f;
+                self.warm.entry(*pair).or_default().push(WarmContact {
+                    local: *local,
+                    normal: *f,
+                    friction: *friction,
+                });
             }
         }
         self.last_pair_forces = pair_forces

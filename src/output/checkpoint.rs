@@ -7,7 +7,9 @@
 //! the contacts touching now (the next step's `build_islands` starts from
 //! them); V-Clip's cached closest features per pair (they decide which
 //! features the next query starts from, and so the last bits of its answer);
-//! the resting-system timers and groups; the sleep settings; and, so that the
+//! the resting-system timers and groups; the sleep settings; the resting
+//! forces of the last solve of each touching pair (the warm start of the
+//! iterative solve); and, so that the
 //! summary of a resumed run reads like an uninterrupted one, the counters,
 //! the largest penetration and the frame loop's own marks (initial energy,
 //! frame index). Stage timings are wall-clock of one process and are not kept.
@@ -37,7 +39,7 @@ use super::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::body::{Body, BodyId};
 use crate::collision::narrowphase::CachedFeatures;
 use crate::scene::Scene;
-use crate::step::{Counters, StageSeconds, Touching, World};
+use crate::step::{Counters, StageSeconds, Touching, WarmContact, World};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -90,6 +92,7 @@ pub struct Checkpoint {
     sleep_group: Vec<u32>,
     last_normal_force_sum: f64,
     last_pair_forces: Vec<(BodyId, BodyId, f64)>,
+    warm: Vec<((BodyId, BodyId), Vec<WarmContact>)>,
     pub run: RunMarks,
     /// Where this checkpoint was read from (not stored; names it in errors).
     #[serde(skip)]
@@ -168,6 +171,7 @@ impl World {
             sleep_group: self.sleep_group.clone(),
             last_normal_force_sum: self.last_normal_force_sum,
             last_pair_forces: self.last_pair_forces.clone(),
+            warm: self.warm.iter().map(|(k, v)| (*k, v.clone())).collect(),
             run: RunMarks::default(),
             source: PathBuf::new(),
         }
@@ -194,6 +198,7 @@ impl World {
         w.sleep_group = ck.sleep_group;
         w.last_normal_force_sum = ck.last_normal_force_sum;
         w.last_pair_forces = ck.last_pair_forces;
+        w.warm = ck.warm.into_iter().collect();
         Ok(w)
     }
 }
