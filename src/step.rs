@@ -1240,9 +1240,10 @@ impl World {
                 let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
                 let rules = &self.scene.settings;
                 let frame_a = pose(&seg[t.a.index()].state).inverse();
-                let mut last = match self.warm_start {
-                    true => self.warm.get(&(t.a, t.b)).cloned().unwrap_or_default(),
-                    false => Vec::new(),
+                let mut last = if self.warm_start {
+                    self.warm.get(&(t.a, t.b)).cloned().unwrap_or_default()
+                } else {
+                    Vec::new()
                 };
                 let reach = WARM_MATCH * oa.outer_radius();
                 for p in &t.points {

@@ -358,6 +358,7 @@ fn solve_phase(
     // Warm start of the iterative solve: last solve's impulses over this
     // phase's interval (resting phase only; an impact has no history).
     let mut warm = Vec::new();
+    let resting = matches!(phase, Phase::Resting { .. });
     for c in &task.contacts {
         let (a, b) = (c.a as usize, c.b as usize);
         let normal = Row::new(&task.bodies, a, b, &c.point, c.normal);
@@ -380,7 +381,6 @@ fn solve_phase(
                     - OVERLAP_RECOVERY * (-c.separation - OVERLAP_SLOP).max(0.0) / task.dt
             }
         };
-        let resting = matches!(phase, Phase::Resting { .. });
         let ni = rows.len();
         rows.push(normal);
         rhs.push(b_n);
@@ -705,7 +705,7 @@ fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -
 /// sagged 0.8 mm in 2 s, where Dantzig holds it to 1.6 µm in 20 s: without
 /// a warm start, 200 sweeps do not carry a tall stack's load down. With the
 /// warm start and up to 1000 sweeps a stack of 100 (1200 rows, always
-/// iterative) stays within 0.4 mm over 2 s (it sank 47 mm before); a
+/// iterative) stays within 0.6 mm over 2 s (it sank 47 mm before); a
 /// trial of the warm-started solve on 200–1000-row islands, kept where it
 /// met `ITERATIVE_RESIDUAL`, was dropped: in the pour of 1000 to t = 1.6 s
 /// 1552 trials missed it (few met it), and the Dantzig solves failed more often
@@ -752,26 +752,23 @@ fn sequential_impulses(
         vec![Vector3::zeros(); bodies],
         vec![Vector3::zeros(); bodies],
     );
-    let mut p: Vec<f64> = (0..m)
-        .map(|i| match findex[i] {
-            None => warm[i].clamp(lo[i], hi[i]),
-            Some(k) => warm[i].clamp(lo[i] * warm[k].max(0.0), hi[i] * warm[k].max(0.0)),
-        })
-        .map(|x| if x.is_finite() { x } else { 0.0 })
-        .collect();
-    for (i, row) in rows.iter().enumerate() {
-        if diag[i] > 1e-300 && p[i] != 0.0 {
-            row.change_velocities(p[i], &mut dv, &mut dw);
-        } else {
-            p[i] = 0.0;
-        }
-    }
-    let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-    let tolerance = ITERATIVE_RESIDUAL * scale;
     let bounds = |i: usize, p: &[f64]| match findex[i] {
         None => (lo[i], hi[i]),
         Some(k) => (lo[i] * p[k].abs(), hi[i] * p[k].abs()),
     };
+    // The warm start, clamped to the bounds. A friction row comes after its
+    // normal row, so its bounds use the normal impulse already started.
+    let mut p = vec![0.0f64; m];
+    for (i, row) in rows.iter().enumerate() {
+        let (l, h) = bounds(i, &p);
+        let start = warm[i].clamp(l, h);
+        if diag[i] > 1e-300 && start.is_finite() && start != 0.0 {
+            p[i] = start;
+            row.change_velocities(start, &mut dv, &mut dw);
+        }
+    }
+    let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
+    let tolerance = ITERATIVE_RESIDUAL * scale;
     // Whether p meets the LCP's conditions to `tolerance`: w ≥ 0 at a lower
     // bound, w ≤ 0 at an upper one, w = 0 between.
     let met = |p: &[f64], dv: &[Vector3<f64>], dw: &[Vector3<f64>]| {
