@@ -4,3 +4,4 @@
 pub mod island;
 pub mod lcp;
 pub mod solver;
+mod subspace;
