@@ -704,35 +704,39 @@ fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -
     Some(p)
 }
 
-/// Rows from which an island is solved by sequential impulses instead of
-/// Dantzig's method. Dantzig's cost grows with the cube of the rows, and on
-/// redundant systems this large its friction passes often cycle: in a pile
-/// of 1000 nuts and bolts, islands of 400–2000 rows took seconds each, at
-/// every impact that touched them, most of the run's time: 5 steps of the
-/// pile took 65 s with this threshold, 23 s with 600. Below it the exact
-/// method stays. At 600 the stack of 50 (about 612 rows) went iterative and
-/// sagged 0.8 mm in 2 s, where Dantzig holds it to 1.6 µm in 20 s: without
-/// a warm start, 200 sweeps do not carry a tall stack's load down. With the
-/// warm start and up to 1000 sweeps a stack of 100 (1200 rows, always
-/// iterative) stays within 0.6 mm over 2 s (it sank 47 mm before); a
-/// trial of the warm-started solve on 200–1000-row islands, kept where it
-/// met `ITERATIVE_RESIDUAL`, was dropped: in the pour of 1000 to t = 1.6 s
-/// 1552 trials missed it (few met it), and the Dantzig solves failed more often
-/// after it (1151 failures and 19.5 M pivots against 820 and 15.5 M); on
-/// the stack of 20 it let the exactly symmetric 240-row system grow to 372
-/// rows, which Dantzig's method then failed on.
-pub const ITERATIVE_MIN_ROWS: usize = 1000;
+/// Rows from which an island is solved by sequential impulses with the
+/// subspace step instead of Dantzig's method. Dantzig's cost grows with the
+/// cube of the rows, and on redundant systems this large its friction
+/// passes often cycle and fail: the stack of 50 (600–800 rows) failed 100
+/// solves in 5 s and took 242 s, the pyramid (about 300 rows) needed 156
+/// compliant retries and 28 s. Solved iteratively since session 5 they take
+/// 0.7 s and 0.5 s, with no failure and the tops within 1.2 µm and 7 nm of
+/// where they started. Below this the exact method stays: it has no
+/// compliance and no tolerance, and small systems are cheap for it.
+/// (The history, from 1000 rows down, is in docs/stability.md.)
+pub const ITERATIVE_MIN_ROWS: usize = 300;
 /// Sweeps of the sequential-impulse solve at most; it stops as soon as its
 /// answer meets the LCP's conditions to `ITERATIVE_RESIDUAL`, checked every
 /// `ITERATIVE_CHECK_EVERY` sweeps (a check costs about one sweep).
 const ITERATIVE_SWEEPS: usize = 1000;
 const ITERATIVE_CHECK_EVERY: usize = 8;
 /// How far an iterative answer may miss the LCP's conditions: each row's
-/// velocity w = A p + b within this share of the largest |b| of the system
-/// on the side its bound does not allow (w ≥ 0 at a lower bound, w ≤ 0 at
-/// an upper one, w = 0 between). For a resting pile (|b| ≈ g·h ≈ 0.1 m/s)
-/// that is 1e-7 m/s, 1 nm of approach over a step.
-const ITERATIVE_RESIDUAL: f64 = 1e-6;
+/// velocity w = (A + c·diag) p + b within the larger of this share of the
+/// largest |b| of the system and `ITERATIVE_FLOOR`, on the side its bound
+/// does not allow (w ≥ 0 at a lower bound, w ≤ 0 at an upper one, w = 0
+/// between). Once the pushing set is right the subspace step is exact, so
+/// the tolerance can be tight: at 1e-6 of |b| (1e-7 m/s at rest) the
+/// pyramid solved iteratively gained 2.9e-6 J in 3 s, its cubes drifting up
+/// by up to 1 nm a step; at the floor it gains none.
+const ITERATIVE_RESIDUAL: f64 = 1e-9;
+/// The least tolerance (m/s): 0.1 nm of approach over a 10 ms step. It
+/// decides for every system slower than 10 m/s. An impact solve of
+/// rounding-size approaches (|b| ≈ 1e-8 m/s) would otherwise ask for
+/// 1e-14 m/s; there most contacts neither push nor move apart, the pushing
+/// set flips between checks, and the solve spent all its sweeps on
+/// violations of 1e-11 to 4e-9 m/s (the pyramid and the stack of 50 ended
+/// a quarter of their solves so).
+const ITERATIVE_FLOOR: f64 = 1e-8;
 /// Compliance of the iteratively solved system, relative to each row's
 /// diagonal (constraint-force mixing, as in ODE and Bullet): the solve
 /// meets w = (A + c·diag) p + b. Redundant contacts (four corners of each
@@ -744,17 +748,21 @@ const ITERATIVE_RESIDUAL: f64 = 1e-6;
 /// c·diag·p: 1e-9 · 0.3 /kg · 20 N·s = 6e-9 m/s under a stack of 100.
 const ITERATIVE_COMPLIANCE: f64 = 1e-9;
 
-/// Projected Gauss–Seidel on w = A p + b without forming A (Erleben's
-/// "sequential impulses", Box2D's and Bullet's solver): each row in turn
-/// takes the impulse that zeroes its w, clamped to its bounds (a friction
-/// row's to ± its coefficient times its normal row's impulse), and the
-/// bodies' velocity changes carry it to the other rows. O(rows) a sweep.
+/// Projected Gauss–Seidel on w = (A + c·diag) p + b without forming A
+/// (Erleben's "sequential impulses", Box2D's and Bullet's solver): each row
+/// in turn takes the impulse that zeroes its w, clamped to its bounds (a
+/// friction row's to ± its coefficient times its normal row's impulse), and
+/// the bodies' velocity changes carry it to the other rows. O(rows) a sweep.
+/// After every `ITERATIVE_CHECK_EVERY` sweeps that did not meet the
+/// conditions, the subspace step (`subspace`) solves the rows strictly
+/// inside their bounds together; the sweeps find which rows push, the step
+/// carries the load through them at once.
 ///
 /// It starts from `warm` (clamped to the bounds): the impulses the same
 /// contacts took in their last solve. A pile or a stack at rest needs
-/// nearly the same impulses every step, and from zero the load of a tall
-/// stack reaches its bottom only after many sweeps. Returns the impulses
-/// and whether they meet the LCP's conditions to `ITERATIVE_RESIDUAL`.
+/// nearly the same impulses every step, so the sweeps start with the right
+/// rows pushing. Returns the impulses and whether they meet the LCP's
+/// conditions to the tolerance (`ITERATIVE_RESIDUAL`, `ITERATIVE_FLOOR`).
 #[allow(clippy::too_many_arguments)]
 fn sequential_impulses(
     rows: &[Row],
@@ -792,7 +800,7 @@ fn sequential_impulses(
         b[i] + rows[i].velocity(dv, dw) + cfm * diag[i] * p[i]
     };
     let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-    let tolerance = ITERATIVE_RESIDUAL * scale;
+    let tolerance = (ITERATIVE_RESIDUAL * scale).max(ITERATIVE_FLOOR);
     // Whether p meets the LCP's conditions to `tolerance`: w ≥ 0 at a lower
     // bound, w ≤ 0 at an upper one, w = 0 between.
     let met = |p: &[f64], dv: &[Vector3<f64>], dw: &[Vector3<f64>]| {
