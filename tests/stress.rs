@@ -190,10 +190,10 @@ fn stack(masses: &[f64]) -> World {
     w
 }
 
-/// Stands for `seconds`: the top moves ≤ 1 mm (in fact ≤ 1 µm), the force
-/// under the k-th cube from the top is k·m·g to 1e-6, nothing sinks, no
-/// energy is gained.
-fn check_stack(n: usize, seconds: f64) {
+/// Stands for `seconds`: the top moves ≤ 1 mm (in fact ≤ `drift_max`), the
+/// force under the k-th cube from the top is k·m·g to `force_error_max`,
+/// nothing sinks, no energy is gained.
+fn check_stack(n: usize, seconds: f64, drift_max: f64, force_error_max: f64) {
     let mut w = stack(&vec![1.0; n]);
     let top0 = w.bodies[n].state.position;
     let mut exec = Inline::default();
@@ -214,8 +214,14 @@ fn check_stack(n: usize, seconds: f64) {
         w.max_penetration, watch.gain, w.counters.solve.failed
     );
     assert!(drift <= 1e-3, "top drifted {drift:e} m");
-    assert!(drift <= 1e-6, "top drifted {drift:e} m (1 µm expected)");
-    assert!(worst_force <= 1e-6, "contact force error {worst_force:e}");
+    assert!(
+        drift <= drift_max,
+        "top drifted {drift:e} m ({drift_max:e} expected)"
+    );
+    assert!(
+        worst_force <= force_error_max,
+        "contact force error {worst_force:e}"
+    );
     assert_penetration(&w, CONTACT_TOLERANCE, "stack");
     assert!(
         watch.gain <= 1e-9 * n as f64,
@@ -231,12 +237,22 @@ fn check_stack(n: usize, seconds: f64) {
 
 #[test]
 fn stack_of_ten_boxes_stands_for_5_s() {
-    check_stack(10, 5.0);
+    check_stack(10, 5.0, 1e-6, 1e-6);
 }
 
 #[test]
 fn stack_of_twenty_boxes_stands_for_3_s() {
-    check_stack(20, 3.0);
+    check_stack(20, 3.0, 1e-6, 1e-6);
+}
+
+/// The stack of fifty: its 600–800-row islands are solved iteratively with
+/// the subspace step (Dantzig's method failed on them 100 times in 5 s and
+/// took 242 s). Measured: top drift 1.2 µm, force error 2.5e-6 (the solve's
+/// 1e-9 compliance over a 50-body chain), no energy gained, no failure;
+/// asserted: 5 µm and 1e-5.
+#[test]
+fn stack_of_fifty_boxes_stands_for_5_s() {
+    check_stack(50, 5.0, 5e-6, 1e-5);
 }
 
 /// The stack of twenty solved by sequential impulses (its 240-row island

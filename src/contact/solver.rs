@@ -722,11 +722,14 @@ fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -
 /// (The history, from 1000 rows down, is in docs/stability.md.)
 pub const ITERATIVE_MIN_ROWS: usize = 300;
 /// Rows up to which an iterative answer that missed the LCP's conditions is
-/// solved again by Dantzig's method (its cost, cubic in the rows, is
-/// seconds past this). The stack of 20 at 300 rows had one such solve in
-/// 20 s (227 of 306 rows off by up to 3.4e-6 m/s, the friction set cycling),
-/// and kept, it added 1e-5 J and moved the top 0.4 µm.
-const DANTZIG_MAX_ROWS: usize = 1000;
+/// solved again by Dantzig's method. The stack of 20 at 300 rows had one
+/// such solve in 20 s (227 of 306 rows off by up to 3.4e-6 m/s, the
+/// friction set cycling), and kept, it added 1e-5 J and moved the top
+/// 0.4 µm. Up to 1000 rows, the pour of 1000 had reached only t = 1.27 s
+/// after 8 minutes (1.6 s in 5.6 minutes without the retry), over half of
+/// it in Dantzig's method: its settling islands of 400–1000 rows often miss
+/// the conditions. 400 is where the compliant retry stops too.
+const DANTZIG_MAX_ROWS: usize = COMPLIANT_RETRY_ROWS;
 /// Sweeps of the sequential-impulse solve at most; it stops as soon as its
 /// answer meets the LCP's conditions to `ITERATIVE_RESIDUAL`, checked every
 /// `ITERATIVE_CHECK_EVERY` sweeps (a check costs about one sweep).
