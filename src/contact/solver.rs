@@ -798,134 +798,202 @@ fn sequential_impulses(
     bodies: usize,
 ) -> (Vec<f64>, bool) {
     let m = rows.len();
-    let (mut dv, mut dw) = (
-        vec![Vector3::zeros(); bodies],
-        vec![Vector3::zeros(); bodies],
-    );
-    let bounds = |i: usize, p: &[f64]| match findex[i] {
-        None => (lo[i], hi[i]),
-        Some(k) => (lo[i] * p[k].abs(), hi[i] * p[k].abs()),
+    let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
+    let system = IterativeSystem {
+        rows,
+        diag,
+        b,
+        lo,
+        hi,
+        findex,
+        compliance: ITERATIVE_COMPLIANCE,
+        tolerance: (ITERATIVE_RESIDUAL * scale).max(ITERATIVE_FLOOR),
+    };
+    let mut state = IterativeState {
+        p: vec![0.0f64; m],
+        dv: vec![Vector3::zeros(); bodies],
+        dw: vec![Vector3::zeros(); bodies],
     };
     // The warm start, clamped to the bounds. A friction row comes after its
     // normal row, so its bounds use the normal impulse already started.
-    let mut p = vec![0.0f64; m];
     for (i, row) in rows.iter().enumerate() {
-        let (l, h) = bounds(i, &p);
+        let (l, h) = system.bounds(i, &state.p);
         let start = warm[i].clamp(l, h);
         if diag[i] > 1e-300 && start.is_finite() && start != 0.0 {
-            p[i] = start;
-            row.change_velocities(start, &mut dv, &mut dw);
+            state.p[i] = start;
+            row.change_velocities(start, &mut state.dv, &mut state.dw);
         }
     }
-    // w = (A + c·diag) p + b, c = ITERATIVE_COMPLIANCE.
-    let cfm = ITERATIVE_COMPLIANCE;
-    let velocity = |i: usize, p: &[f64], dv: &[Vector3<f64>], dw: &[Vector3<f64>]| {
-        b[i] + rows[i].velocity(dv, dw) + cfm * diag[i] * p[i]
-    };
-    let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-    let tolerance = (ITERATIVE_RESIDUAL * scale).max(ITERATIVE_FLOOR);
-    // Whether p meets the LCP's conditions to `tolerance`: w ≥ 0 at a lower
-    // bound, w ≤ 0 at an upper one, w = 0 between.
-    let met = |p: &[f64], dv: &[Vector3<f64>], dw: &[Vector3<f64>]| {
-        (0..m).all(|i| {
-            if diag[i] <= 1e-300 {
-                return true;
-            }
-            let wi = velocity(i, p, dv, dw);
-            let (l, h) = bounds(i, p);
-            match (p[i] <= l, p[i] >= h) {
-                (true, true) => true,
-                (true, false) => wi >= -tolerance,
-                (false, true) => wi <= tolerance,
-                (false, false) => wi.abs() <= tolerance,
-            }
-        })
-    };
-    // How far p is from meeting them, in velocity: the length of
-    // diag·(p − clamp(p − w/diag)), zero exactly at an answer.
-    let natural_residual = |p: &[f64], dv: &[Vector3<f64>], dw: &[Vector3<f64>]| {
-        (0..m)
-            .filter(|&i| diag[i] > 1e-300)
-            .map(|i| {
-                let wi = velocity(i, p, dv, dw);
-                let (l, h) = bounds(i, p);
-                let r = diag[i] * (p[i] - (p[i] - wi / diag[i]).clamp(l, h));
-                r * r
-            })
-            .sum::<f64>()
-    };
     let by_body = subspace::rows_by_body(rows, bodies);
     let (mut steps_left, mut rejected_in_a_row) = (SUBSPACE_STEPS, 0);
     for sweep in 0..ITERATIVE_SWEEPS {
         if sweep % ITERATIVE_CHECK_EVERY == 0 {
-            if met(&p, &dv, &dw) {
-                return (p, true);
+            if system.met(&state) {
+                return (state.p, true);
             }
-            // After each block of sweeps, solve the rows that push all at
-            // once (see `subspace`), then project onto the bounds in row
-            // order (a friction row's bound follows its normal row's new
-            // impulse).
             if sweep > 0 && steps_left > 0 && rejected_in_a_row < SUBSPACE_REJECTIONS {
                 steps_left -= 1;
-                let free: Vec<usize> = (0..m)
-                    .filter(|&i| {
-                        let (l, h) = bounds(i, &p);
-                        diag[i] > 1e-300 && p[i] > l && p[i] < h
-                    })
-                    .collect();
-                let residual: Vec<f64> = free.iter().map(|&i| velocity(i, &p, &dv, &dw)).collect();
-                if let Some(step) =
-                    subspace::free_block_step(rows, diag, &by_body, &free, &residual, cfm)
-                {
-                    let before = (p.clone(), dv.clone(), dw.clone());
-                    let residual_before = natural_residual(&p, &dv, &dw);
-                    let mut target = p.clone();
-                    for (&i, d) in free.iter().zip(&step) {
-                        target[i] += d;
-                    }
-                    for i in 0..m {
-                        let (l, h) = bounds(i, &p);
-                        let delta = target[i].clamp(l, h) - p[i];
-                        if delta != 0.0 && delta.is_finite() {
-                            p[i] += delta;
-                            rows[i].change_velocities(delta, &mut dv, &mut dw);
-                        }
-                    }
-                    // Kept only if it brings p closer to meeting the
-                    // conditions: the projection can spoil a step (a row
-                    // the sweeps took for pushing is clamped to zero, and
-                    // the rest no longer balance). Not "lowers ½pᵀAp + bᵀp":
-                    // with friction bounds that follow the normal impulses
-                    // the answer is no minimum of it, and near the answer
-                    // good steps raise it (kept that way, a stack of 100
-                    // swayed 5 mm).
-                    let residual_after = natural_residual(&p, &dv, &dw);
-                    if !(residual_after < residual_before) {
-                        (p, dv, dw) = before;
-                        rejected_in_a_row += 1;
-                    } else if met(&p, &dv, &dw) {
-                        return (p, true);
-                    } else {
-                        rejected_in_a_row = 0;
-                    }
+                match system.subspace_step(&by_body, &mut state) {
+                    Step::Kept if system.met(&state) => return (state.p, true),
+                    Step::Kept => rejected_in_a_row = 0,
+                    Step::Rejected => rejected_in_a_row += 1,
+                    Step::NotTaken => {}
                 }
             }
         }
-        for i in 0..m {
-            if diag[i] <= 1e-300 {
-                continue;
-            }
-            let row = &rows[i];
-            let wi = velocity(i, &p, &dv, &dw);
-            let (l, h) = bounds(i, &p);
-            let new = (p[i] - wi / (diag[i] * (1.0 + cfm))).clamp(l, h);
-            let delta = if new.is_finite() { new - p[i] } else { -p[i] };
-            p[i] += delta;
-            row.change_velocities(delta, &mut dv, &mut dw);
+        system.sweep(&mut state);
+    }
+    let met = system.met(&state);
+    (state.p, met)
+}
+
+/// The boxed LCP the iterative solve works on, w = (A + c·diag) p + b with
+/// c = `compliance`, held as its rows (A is never formed).
+struct IterativeSystem<'a> {
+    rows: &'a [Row],
+    diag: &'a [f64],
+    b: &'a [f64],
+    lo: &'a [f64],
+    hi: &'a [f64],
+    findex: &'a [Option<usize>],
+    compliance: f64,
+    /// How far w may miss the conditions (m/s).
+    tolerance: f64,
+}
+
+/// The impulses of an iterative solve and the velocity changes they give
+/// the bodies (M⁻¹Jᵀp), kept in step.
+#[derive(Clone)]
+struct IterativeState {
+    p: Vec<f64>,
+    dv: Vec<Vector3<f64>>,
+    dw: Vec<Vector3<f64>>,
+}
+
+/// What became of a subspace step.
+enum Step {
+    Kept,
+    Rejected,
+    /// No row was free, or the factorisation failed.
+    NotTaken,
+}
+
+impl IterativeSystem<'_> {
+    /// Row i's bounds; a friction row's are its coefficients times its
+    /// normal row's impulse.
+    fn bounds(&self, i: usize, p: &[f64]) -> (f64, f64) {
+        match self.findex[i] {
+            None => (self.lo[i], self.hi[i]),
+            Some(k) => (self.lo[i] * p[k].abs(), self.hi[i] * p[k].abs()),
         }
     }
-    let met = met(&p, &dv, &dw);
-    (p, met)
+
+    /// w_i = (A p + b)_i + c·A_ii·p_i.
+    fn velocity(&self, i: usize, s: &IterativeState) -> f64 {
+        self.b[i] + self.rows[i].velocity(&s.dv, &s.dw) + self.compliance * self.diag[i] * s.p[i]
+    }
+
+    /// Whether the rows that can take an impulse meet the LCP's conditions
+    /// to `tolerance`: w ≥ 0 at a lower bound, w ≤ 0 at an upper one, w = 0
+    /// between.
+    fn met(&self, s: &IterativeState) -> bool {
+        (0..self.rows.len()).all(|i| {
+            if self.diag[i] <= 1e-300 {
+                return true;
+            }
+            let wi = self.velocity(i, s);
+            let (l, h) = self.bounds(i, &s.p);
+            match (s.p[i] <= l, s.p[i] >= h) {
+                (true, true) => true,
+                (true, false) => wi >= -self.tolerance,
+                (false, true) => wi <= self.tolerance,
+                (false, false) => wi.abs() <= self.tolerance,
+            }
+        })
+    }
+
+    /// How far p is from meeting them, in velocity: the squared length of
+    /// diag·(p − clamp(p − w/diag)), zero exactly at an answer.
+    fn natural_residual(&self, s: &IterativeState) -> f64 {
+        (0..self.rows.len())
+            .filter(|&i| self.diag[i] > 1e-300)
+            .map(|i| {
+                let wi = self.velocity(i, s);
+                let (l, h) = self.bounds(i, &s.p);
+                let r = self.diag[i] * (s.p[i] - (s.p[i] - wi / self.diag[i]).clamp(l, h));
+                r * r
+            })
+            .sum::<f64>()
+    }
+
+    /// One projected Gauss–Seidel sweep over the rows in order.
+    fn sweep(&self, s: &mut IterativeState) {
+        for (i, row) in self.rows.iter().enumerate() {
+            if self.diag[i] <= 1e-300 {
+                continue;
+            }
+            let wi = self.velocity(i, s);
+            let (l, h) = self.bounds(i, &s.p);
+            let new = (s.p[i] - wi / (self.diag[i] * (1.0 + self.compliance))).clamp(l, h);
+            let delta = if new.is_finite() {
+                new - s.p[i]
+            } else {
+                -s.p[i]
+            };
+            s.p[i] += delta;
+            row.change_velocities(delta, &mut s.dv, &mut s.dw);
+        }
+    }
+
+    /// Solves the rows strictly inside their bounds together (see
+    /// `subspace`), then projects onto the bounds in row order (a friction
+    /// row's bound follows its normal row's new impulse). Kept only if it
+    /// brings p closer to meeting the conditions: the projection can spoil
+    /// a step (a row the sweeps took for pushing is clamped to zero, and the
+    /// rest no longer balance). Not "lowers ½pᵀAp + bᵀp": with friction
+    /// bounds that follow the normal impulses the answer is no minimum of
+    /// it, and near the answer good steps raise it (judged that way, a
+    /// stack of 100 swayed 5 mm).
+    fn subspace_step(&self, by_body: &[Vec<usize>], s: &mut IterativeState) -> Step {
+        let m = self.rows.len();
+        let free: Vec<usize> = (0..m)
+            .filter(|&i| {
+                let (l, h) = self.bounds(i, &s.p);
+                self.diag[i] > 1e-300 && s.p[i] > l && s.p[i] < h
+            })
+            .collect();
+        let residual: Vec<f64> = free.iter().map(|&i| self.velocity(i, s)).collect();
+        let Some(step) = subspace::free_block_step(
+            self.rows,
+            self.diag,
+            by_body,
+            &free,
+            &residual,
+            self.compliance,
+        ) else {
+            return Step::NotTaken;
+        };
+        let before = s.clone();
+        let residual_before = self.natural_residual(s);
+        let mut target = s.p.clone();
+        for (&i, d) in free.iter().zip(&step) {
+            target[i] += d;
+        }
+        for i in 0..m {
+            let (l, h) = self.bounds(i, &s.p);
+            let delta = target[i].clamp(l, h) - s.p[i];
+            if delta != 0.0 && delta.is_finite() {
+                s.p[i] += delta;
+                self.rows[i].change_velocities(delta, &mut s.dv, &mut s.dw);
+            }
+        }
+        if self.natural_residual(s) < residual_before {
+            Step::Kept
+        } else {
+            *s = before;
+            Step::Rejected
+        }
+    }
 }
 
 /// Last-resort fallback: projected Gauss–Seidel on the boxed LCP.
