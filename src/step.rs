@@ -32,7 +32,7 @@ use crate::output::summary::{Distribution, RankSummary};
 use crate::scene::Scene;
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::Instant;
 
 /// Runs the distributable stages. One rank: `Inline`; several: `cluster`.
@@ -219,6 +219,10 @@ pub(crate) struct WarmContact {
     pub(crate) normal: f64,
     pub(crate) friction: Vector3<f64>,
 }
+
+/// A contact point of an island task: its body pair and where it is in A's
+/// body frame (the key its resting force is kept under for the warm start).
+type ContactWhere = ((BodyId, BodyId), Vector3<f64>);
 
 /// A point of a new contact takes the warm start of the nearest point of the
 /// pair's last solve within this share of A's outer radius (resting
@@ -557,7 +561,7 @@ impl World {
             }
         }
         self.touching = self.touching_from(&pairs, &results);
-        let touching: std::collections::BTreeSet<(BodyId, BodyId)> =
+        let touching: BTreeSet<(BodyId, BodyId)> =
             self.touching.iter().map(|t| (t.a, t.b)).collect();
         self.warm.retain(|k, _| touching.contains(k));
         self.steps += 1;
@@ -1222,8 +1226,7 @@ impl World {
             0.5 * self.scene.settings.gravity.norm() * self.scene.settings.dt;
         let mut tasks = Vec::with_capacity(islands.len());
         // Per island, each contact's pair and point in A's body frame.
-        let mut contact_pairs: Vec<Vec<((BodyId, BodyId), Vector3<f64>)>> =
-            Vec::with_capacity(islands.len());
+        let mut contact_pairs: Vec<Vec<ContactWhere>> = Vec::with_capacity(islands.len());
         for (bodies, contact_ids) in &islands {
             let mut pairs_here = Vec::new();
             let mut index: Vec<BodyId> = bodies.clone();
@@ -1332,7 +1335,7 @@ impl World {
             .collect();
         let results = exec.solve_islands(tasks);
         self.last_normal_force_sum = 0.0;
-        let mut pair_forces: std::collections::BTreeMap<(BodyId, BodyId), f64> = Default::default();
+        let mut pair_forces: BTreeMap<(BodyId, BodyId), f64> = Default::default();
         for (pairs, r) in contact_pairs.iter().zip(&results) {
             for (pair, _) in pairs {
                 self.warm.remove(pair);

@@ -137,9 +137,10 @@ pub struct SolveStats {
     /// Islands of `ITERATIVE_MIN_ROWS` rows or more, solved by sequential
     /// impulses (not counted in `lcp_solves`).
     pub iterative_solves: u32,
-    /// Of those, the ones whose answer still missed the LCP's conditions by
-    /// more than `ITERATIVE_RESIDUAL` after `ITERATIVE_SWEEPS` sweeps (kept:
-    /// no exact method is affordable at that size).
+    /// Of those, the ones whose answer still missed the LCP's conditions
+    /// (`ITERATIVE_RESIDUAL`, `ITERATIVE_FLOOR`) after `ITERATIVE_SWEEPS`
+    /// sweeps: solved again by Dantzig's method below `DANTZIG_MAX_ROWS`,
+    /// kept above it.
     pub iterative_unconverged: u32,
 }
 
@@ -715,9 +716,9 @@ fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -
 /// cube of the rows, and on redundant systems this large its friction
 /// passes often cycle and fail: the stack of 50 (600–800 rows) failed 100
 /// solves in 5 s and took 242 s, the pyramid (about 300 rows) needed 156
-/// compliant retries and 28 s. Solved iteratively since session 5 they take
-/// 0.7 s and 0.5 s, with no failure and the tops within 1.2 µm and 7 nm of
-/// where they started. Below this the exact method stays: it has no
+/// compliant retries and 28 s (5 s of each). Solved iteratively since
+/// session 5 they take 0.6 s and 1.5 s, with no failure and the tops within
+/// 1.2 µm and 8 nm of where they started. Below this the exact method stays: it has no
 /// compliance and no tolerance, and small systems are cheap for it.
 /// (The history, from 1000 rows down, is in docs/stability.md.)
 pub const ITERATIVE_MIN_ROWS: usize = 300;
@@ -979,12 +980,12 @@ impl IterativeSystem<'_> {
         for (&i, d) in free.iter().zip(&step) {
             target[i] += d;
         }
-        for i in 0..m {
+        for (i, (row, t)) in self.rows.iter().zip(target).enumerate() {
             let (l, h) = self.bounds(i, &s.p);
-            let delta = target[i].clamp(l, h) - s.p[i];
+            let delta = t.clamp(l, h) - s.p[i];
             if delta != 0.0 && delta.is_finite() {
                 s.p[i] += delta;
-                self.rows[i].change_velocities(delta, &mut s.dv, &mut s.dw);
+                row.change_velocities(delta, &mut s.dv, &mut s.dw);
             }
         }
         if self.natural_residual(s) < residual_before {

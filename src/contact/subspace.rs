@@ -74,12 +74,11 @@ pub(super) fn free_block_step(
         neighbours.sort_unstable();
         neighbours.dedup();
         for &l in &neighbours {
-            entries.push(Triplet::new(k, l, rows[i].coupling(&rows[free[l]])));
-        }
-    }
-    for entry in &mut entries {
-        if entry.row == entry.col {
-            entry.val += compliance * diag[free[entry.row]];
+            let mut val = rows[i].coupling(&rows[free[l]]);
+            if l == k {
+                val += compliance * diag[i];
+            }
+            entries.push(Triplet::new(k, l, val));
         }
     }
     let block = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &entries).ok()?;
