@@ -1274,6 +1274,7 @@ impl World {
                         separation: p.separation,
                         warm_force,
                         warm_friction,
+                        turns: p.turns,
                     });
                 }
             }

@@ -44,6 +44,22 @@ pub struct ContactPoint {
     pub normal: Vector3<f64>,
     /// Signed gap along `normal`; negative is overlap.
     pub separation: f64,
+    /// How the normal turns as the bodies do: the gap's second derivative
+    /// has a term in the normal's rate (see `NormalTurn`).
+    pub turns: NormalTurn,
+}
+
+/// Which features the contact normal belongs to, so the contact solve can
+/// tell how fast it turns: with A's face (or A's side of a vertex–feature
+/// contact), with B's, or as the cross product of two edges, one on each
+/// body (world directions). Two edges sliding across each other while both
+/// bodies spin bend the gap at up to 2·ṅ·(relative velocity): 245 m/s² for
+/// two light hulls spinning at 20 rad/s (docs/stability.md, fragile 1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum NormalTurn {
+    WithA,
+    WithB,
+    Edges(Vector3<f64>, Vector3<f64>),
 }
 
 /// Contact points of A and B given their V-Clip `proximity`. Empty when they
@@ -83,6 +99,23 @@ pub fn contact_points(
     let onto_b_level = |x: Vector3<f64>| x - n * n.dot(&(x - high_b));
     let onto_a_level = |y: Vector3<f64>| y + n * n.dot(&(low_a - y));
 
+    let turns = match (&fa, &fb) {
+        (Support::Face(_, na, _), Support::Face(_, nb, _)) => {
+            if na.dot(&n).abs() > nb.dot(&n).abs() {
+                NormalTurn::WithA
+            } else {
+                NormalTurn::WithB
+            }
+        }
+        (Support::Face(..), Support::Edge(..)) | (_, Support::Vertex(_)) => NormalTurn::WithA,
+        (Support::Edge(p0, p1), Support::Edge(q0, q1))
+            if (p1 - p0).normalize().cross(&(q1 - q0).normalize()).norm()
+                > FACE_CONTACT_ANGLE.sin() =>
+        {
+            NormalTurn::Edges(p1 - p0, q1 - q0)
+        }
+        _ => NormalTurn::WithB,
+    };
     let mut pairs: Vec<(Vector3<f64>, Vector3<f64>)> = match (&fa, &fb) {
         (Support::Face(pa, na, oa), Support::Face(pb, nb, ob)) => {
             if na.dot(&n).abs() > nb.dot(&n).abs() {
@@ -120,6 +153,7 @@ pub fn contact_points(
             point: (pa + pb) / 2.0,
             normal: n,
             separation: n.dot(&(pa - pb)),
+            turns,
         })
         .collect();
     let closest = points

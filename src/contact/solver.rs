@@ -30,6 +30,7 @@
 
 use super::{lcp, subspace};
 use crate::body::BodyId;
+use crate::collision::manifold::NormalTurn;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -67,6 +68,8 @@ pub struct IslandContact {
     /// of the iterative solve (warm start; Dantzig's method does not use it).
     pub warm_force: f64,
     pub warm_friction: Vector3<f64>,
+    /// How the normal turns with the bodies (for `gap_curvature`).
+    pub turns: NormalTurn,
 }
 
 /// Separating speeds below this (m/s) count as resting in the resting
@@ -256,8 +259,10 @@ enum Phase<'a> {
     Impact,
     /// `start`: the velocities at the start of the step (after any impact),
     /// before the external forces act.
+    /// `curvature`: each contact's `gap_curvature`.
     Resting {
         start: (&'a [Vector3<f64>], &'a [Vector3<f64>]),
+        curvature: &'a [f64],
     },
 }
 
@@ -299,16 +304,24 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
         .zip(&task.bodies)
         .map(|(w, b)| w + b.external_dw)
         .collect();
-    let needed = task.contacts.iter().any(|c| {
+    let curvature: Vec<f64> = task
+        .contacts
+        .iter()
+        .map(|c| gap_curvature(task, c, &v, &w))
+        .collect();
+    let needed = task.contacts.iter().zip(&curvature).any(|(c, k)| {
         let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
-        row.velocity(&vf, &wf) < 0.0
+        row.velocity(&vf, &wf) + k * task.dt < 0.0
     });
     if needed {
         let (rows, p, sum) = solve_phase(
             task,
             &vf,
             &wf,
-            Phase::Resting { start: (&v, &w) },
+            Phase::Resting {
+                start: (&v, &w),
+                curvature: &curvature,
+            },
             &mut out.stats,
         );
         out.normal_force_sum = sum / task.dt;
@@ -351,6 +364,51 @@ fn apply(row: &Row, p: f64, lin: &mut [Vector3<f64>], ang: &mut [Vector3<f64>]) 
     ang[row.b] += row.ang_b * p;
 }
 
+/// The gap's acceleration at contact `c` that the velocities alone give,
+/// with no force acting (the velocity-product term J̇v of Baraff's
+/// "Fast contact force computation", 1994): along the normal, each contact
+/// point's centripetal ω×(ω×r) and gyroscopic ω̇×r acceleration, plus
+/// 2ṅ·(v_A − v_B) as the normal turns under the relative velocity. The
+/// resting solve's prediction J·(v + h·a) misses it; where it is large (two
+/// spinning hulls sliding edge on edge: −245 m/s²) the gap closed again
+/// 28 µs after every impact, and a step took 256 impact events of 0.1 µm
+/// each (docs/stability.md, fragile 1).
+fn gap_curvature(
+    task: &IslandTask,
+    c: &IslandContact,
+    v: &[Vector3<f64>],
+    w: &[Vector3<f64>],
+) -> f64 {
+    let (ba, bb) = (&task.bodies[c.a as usize], &task.bodies[c.b as usize]);
+    let (wa, wb) = (w[c.a as usize], w[c.b as usize]);
+    let (ra, rb) = (c.point - ba.position, c.point - bb.position);
+    // Torque-free spin still turns ω as the inertia turns: I ω̇ = (I ω) × ω.
+    let gyroscopic = |body: &IslandBody, w: &Vector3<f64>| -> Vector3<f64> {
+        match body.inv_inertia.try_inverse() {
+            Some(inertia) => body.inv_inertia * (inertia * w).cross(w),
+            None => Vector3::zeros(),
+        }
+    };
+    let accel = |body: &IslandBody, w: &Vector3<f64>, r: &Vector3<f64>| {
+        gyroscopic(body, w).cross(r) + w.cross(&w.cross(r))
+    };
+    let relative_velocity = (v[c.a as usize] + wa.cross(&ra)) - (v[c.b as usize] + wb.cross(&rb));
+    let n = c.normal;
+    let turning = match c.turns {
+        NormalTurn::WithA => wa.cross(&n),
+        NormalTurn::WithB => wb.cross(&n),
+        NormalTurn::Edges(ea, eb) => {
+            let m = ea.cross(&eb);
+            let len = m.norm();
+            let dm = wa.cross(&ea).cross(&eb) + ea.cross(&wb.cross(&eb));
+            let u = m / len;
+            let du = (dm - u * u.dot(&dm)) / len;
+            if u.dot(&n) >= 0.0 { du } else { -du }
+        }
+    };
+    n.dot(&(accel(ba, &wa, &ra) - accel(bb, &wb, &rb))) + 2.0 * turning.dot(&relative_velocity)
+}
+
 /// Builds and solves the LCP of one phase. Returns the rows, their impulses
 /// and the sum of the normal impulses.
 fn solve_phase(
@@ -368,8 +426,11 @@ fn solve_phase(
     // Warm start of the iterative solve: last solve's impulses over this
     // phase's interval (resting phase only; an impact has no history).
     let mut warm = Vec::new();
+    // Each row's velocity-product term over the interval (`gap_curvature`):
+    // the energy guard counts it as velocity the row already has.
+    let mut bias = Vec::new();
     let resting = matches!(phase, Phase::Resting { .. });
-    for c in &task.contacts {
+    for (ci, c) in task.contacts.iter().enumerate() {
         let (a, b) = (c.a as usize, c.b as usize);
         let normal = Row::new(&task.bodies, a, b, &c.point, c.normal);
         let vn = normal.velocity(v, w);
@@ -384,13 +445,17 @@ fn solve_phase(
             // lifting off and rocking, while the constant force of the step
             // still carries it up by h·u/2: a rocking nut gained 1.2e-5 J
             // each time, and never came to rest.
-            Phase::Resting { start } => {
+            Phase::Resting { start, curvature } => {
                 let u = normal.velocity(start.0, start.1);
                 let separating = if u > SEPARATING_EPS { u } else { 0.0 };
-                vn + separating
+                vn + separating + curvature[ci] * task.dt
                     - OVERLAP_RECOVERY * (-c.separation - OVERLAP_SLOP).max(0.0) / task.dt
             }
         };
+        bias.push(match phase {
+            Phase::Resting { curvature, .. } => curvature[ci] * task.dt,
+            Phase::Impact => 0.0,
+        });
         let ni = rows.len();
         rows.push(normal);
         rhs.push(b_n);
@@ -409,6 +474,7 @@ fn solve_phase(
                     0.0
                 });
                 rhs.push(row.velocity(v, w));
+                bias.push(0.0);
                 rows.push(row);
                 // Friction bounds are coefficients of the normal impulse: |p_t| ≤ μ p_N.
                 lo.push(-c.friction);
@@ -453,7 +519,7 @@ fn solve_phase(
             stats.iterative_unconverged += 1;
         }
         if met || m >= DANTZIG_MAX_ROWS {
-            let p = guard_iterative(&diag, &rows, &findex, v, w, p, stats);
+            let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
             let sum = normal_sum(&p);
             return (rows, p, sum);
         }
@@ -509,7 +575,7 @@ fn solve_phase(
         },
     };
     let diag: Vec<f64> = (0..m).map(|i| a[i * m + i]).collect();
-    let p = energy_guard(&diag, &rows, v, w, p, stats, |vel| {
+    let p = energy_guard(&diag, &rows, (v, w, &bias), p, stats, |vel| {
         solve_normal_rows(&a, m, vel, &findex)
     });
     let sum = normal_sum(&p);
@@ -523,23 +589,26 @@ fn guard_iterative(
     diag: &[f64],
     rows: &[Row],
     findex: &[Option<usize>],
-    v: &[Vector3<f64>],
-    w: &[Vector3<f64>],
+    velocities: Velocities,
     p: Vec<f64>,
     stats: &mut SolveStats,
 ) -> Vec<f64> {
     let m = rows.len();
-    energy_guard(diag, rows, v, w, p, stats, |vel| {
+    let bodies = velocities.0.len();
+    energy_guard(diag, rows, velocities, p, stats, |vel| {
         let normal_hi: Vec<f64> = findex
             .iter()
             .map(|f| if f.is_none() { f64::INFINITY } else { 0.0 })
             .collect();
         let zero = vec![0.0; m];
-        let (p, _) =
-            sequential_impulses(rows, diag, vel, &zero, &normal_hi, findex, &zero, v.len());
+        let (p, _) = sequential_impulses(rows, diag, vel, &zero, &normal_hi, findex, &zero, bodies);
         Some(p)
     })
 }
+
+/// The body velocities a solve acts on, and each row's bias (see
+/// `energy_guard`).
+type Velocities<'a> = (&'a [Vector3<f64>], &'a [Vector3<f64>], &'a [f64]);
 
 /// Compliance added to the diagonal of a contact system the exact solve
 /// failed on, relative to its largest diagonal entry. Redundant contacts (a
@@ -581,11 +650,15 @@ const ENERGY_GAIN_ALLOWED: f64 = 0.01;
 /// (w = A_N p + J_N v ≥ 0, p ≥ 0) is the minimiser of that quadratic over
 /// p ≥ 0, and p = 0 is feasible, so it can never add energy: it replaces a
 /// rejected solution (reported as a failure with the system size).
+///
+/// A row's `bias` (the gap's curvature over the interval, `gap_curvature`)
+/// counts as velocity it already has: an impulse that holds a curving gap
+/// open does no work on the real motion, though the linear prediction of
+/// the velocities says it does.
 fn energy_guard(
     diag: &[f64],
     rows: &[Row],
-    v: &[Vector3<f64>],
-    w: &[Vector3<f64>],
+    (v, w, bias): Velocities,
     p: Vec<f64>,
     stats: &mut SolveStats,
     safe_solve: impl FnOnce(&[f64]) -> Option<Vec<f64>>,
@@ -601,11 +674,16 @@ fn energy_guard(
         }
         let e: f64 = (0..n)
             .map(|i| lin[i].dot(&(v[i] + 0.5 * dv[i])) + ang[i].dot(&(w[i] + 0.5 * dw[i])))
-            .sum();
+            .sum::<f64>()
+            + x.iter().zip(bias).map(|(pi, b)| pi * b).sum::<f64>();
         if e.is_finite() { e } else { f64::INFINITY }
     };
     // The kinetic energy the rows see: Σ ½ v_i² / A_ii.
-    let vel: Vec<f64> = rows.iter().map(|r| r.velocity(v, w)).collect();
+    let vel: Vec<f64> = rows
+        .iter()
+        .zip(bias)
+        .map(|(r, b)| r.velocity(v, w) + b)
+        .collect();
     let scale: f64 = (0..m)
         .filter(|&i| diag[i] > 0.0)
         .map(|i| 0.5 * vel[i] * vel[i] / diag[i])
@@ -1173,9 +1251,16 @@ mod tests {
         let x = 1e14;
         let mut stats = SolveStats::default();
         let diag: Vec<f64> = (0..m).map(|i| a[i * m + i]).collect();
-        let p = energy_guard(&diag, &rows, &v, &w, vec![x, 3.0 - x], &mut stats, |vel| {
-            solve_normal_rows(&a, m, vel, &[None, None])
-        });
+        let unbiased = [0.0; 2];
+        let velocities = (&v[..], &w[..], &unbiased[..]);
+        let p = energy_guard(
+            &diag,
+            &rows,
+            velocities,
+            vec![x, 3.0 - x],
+            &mut stats,
+            |vel| solve_normal_rows(&a, m, vel, &[None, None]),
+        );
         assert_eq!(stats.failed, 1, "the guard let {p:?} through");
         // The safe answer stops the body (inelastic): net impulse 1 N s.
         assert!((p[0] + p[1] - 1.0).abs() < 1e-9, "{p:?}");
