@@ -1274,9 +1274,11 @@ proptest! {
         check_random_scene(&bodies, 2e-3, true)?;
     }
 
+    /// The same 24 scenes within the 10 µm contact tolerance itself. At
+    /// 1ca4036 the median scene reached 10.3 µm and the worst of the 300
+    /// swept 1.47 mm (the tests below); the gap's curvature in the resting
+    /// solve and the earlier impacts found in an event's group end that.
     #[test]
-    #[ignore = "bug: overlaps exceed the 10 µm contact tolerance in most random scenes (median \
-                10 µm at 1b7540f, 0.16 mm at 6fdb978; see the tests below)"]
     fn random_scenes_keep_overlaps_within_the_contact_tolerance(
         bodies in prop::collection::vec(body_strategy(), 2..13)
     ) {
@@ -1304,11 +1306,12 @@ fn replay(dir: &str) -> (World, Watch, f64) {
     let mut watch = Watch::new(&w);
     watch.run_until(&mut w, &mut exec, 2.0);
     println!(
-        "{dir}: penetration {:.3e} m (over 10 µm from t = {:?}), {} TOI events, {} overlaps \
-         accepted, energy gain {:.3e} J, largest one-step rise {:.3e} J at t = {:.2} s (scale {:.1} J)",
+        "{dir}: penetration {:.3e} m (over 10 µm from t = {:?}), {} TOI events (at most {} in a \
+         step), {} overlaps accepted, energy gain {:.3e} J, largest one-step rise {:.3e} J at t = {:.2} s (scale {:.1} J)",
         w.max_penetration,
         watch.first_over,
         w.counters.toi_events,
+        w.counters.max_events_in_step,
         w.counters.overlaps_accepted,
         watch.gain,
         watch.rise,
@@ -1321,10 +1324,9 @@ fn replay(dir: &str) -> (World, Watch, f64) {
 /// A hexagonal prism (body 6, 2.12 kg) spinning at about 16 rad/s and a
 /// 0.15 kg hull (body 16). At 1b7540f the step of t = 0.63 s ended with a
 /// 0.417 mm overlap after 34 time-of-impact events, none accepted; at
-/// 6fdb978 the scene reaches 0.60 mm with 5 overlaps accepted.
+/// 6fdb978 the scene reached 0.60 mm with 5 overlaps accepted, at 1ca4036
+/// 10.8 µm after 789 events; now 9.6 µm after 457.
 #[test]
-#[ignore = "bug: overlap of 0.42 mm (1b7540f: body 6 / body 16, t = 0.63 s, not rolled back), \
-            0.60 mm at 6fdb978"]
 fn spinning_prism_and_light_hull_overlap_by_half_a_millimetre() {
     let (w, _, _) = replay("stress_spinning_prism_overlap");
     assert_penetration(&w, CONTACT_TOLERANCE, "spinning prism");
@@ -1333,13 +1335,21 @@ fn spinning_prism_and_light_hull_overlap_by_half_a_millimetre() {
 /// Two light hulls (body 11, 0.21 kg; body 16, 0.10 kg) spinning at up to
 /// 20 rad/s in contact. At 1b7540f they needed more than the 256 impact
 /// events a step allows in the step that ends at t = 0.55 s, and the 1.04 mm
-/// overlap left was accepted; at 6fdb978 the scene reaches 0.33 mm.
+/// overlap left was accepted; at 6fdb978 the scene reached 0.33 mm, at
+/// 1ca4036 0.94 mm. Their edges slide across each other at m/s while both
+/// spin: the gap curves in at 245 m/s², and with the resting solve blind to
+/// that, it closed again 28 µs after each impact, 0.1 µm deeper each time
+/// (256 events in the step from t = 0.54 s). Now 9.95 µm, at most 13
+/// events in a step.
 #[test]
-#[ignore = "bug: 256 impact events in one step (1b7540f: bodies 11/16, t = 0.55 s), the 1.04 mm \
-            overlap left is accepted; 0.33 mm at 6fdb978"]
 fn light_spinning_hulls_use_up_the_event_budget_and_overlap() {
     let (w, _, _) = replay("stress_event_budget_overlap");
     assert_penetration(&w, CONTACT_TOLERANCE, "event budget");
+    assert!(
+        w.counters.max_events_in_step <= 64,
+        "{} impact events in one step",
+        w.counters.max_events_in_step
+    );
 }
 
 /// A nut leaning on a fixed bolt and on the floor at one rim point, rocking
@@ -1454,7 +1464,9 @@ fn random_scene_sweep() {
         }
     }
     if let (Some(keep), Some((_, bodies))) = (std::env::var_os("STRESS_DUMP"), &worst) {
-        let keep = std::path::PathBuf::from(keep);
+        // Its own folder: its hulls must not overwrite those of a scene
+        // written above.
+        let keep = std::path::PathBuf::from(keep).join("worst");
         std::fs::create_dir_all(&keep).unwrap();
         let text = random_scene(bodies, &keep);
         std::fs::write(keep.join("random.toml"), text).unwrap();
