@@ -7,7 +7,7 @@ use crate::output::checkpoint::{self, Checkpoint, RunMarks};
 use crate::output::progress::Progress;
 use crate::output::summary::{RankSummary, Summary};
 use crate::output::trajectory::{Continued, TrajectoryWriter};
-use crate::output::write_atomic;
+use crate::output::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::render;
 use crate::scene::Scene;
 use crate::step::{Executor, World};
@@ -84,6 +84,30 @@ pub struct Frame {
     pub poses: Vec<Pose>,
 }
 
+impl Frame {
+    /// FNV-1a 64 of the frame's index and poses: the same on rank 0, which
+    /// keeps it in checkpoints, and on the rank that draws the frame.
+    pub fn digest(&self) -> u64 {
+        let mut h = FNV_OFFSET;
+        fnv1a(&mut h, &self.index.to_le_bytes());
+        for p in &self.poses {
+            for x in p.position.iter().chain(&p.orientation) {
+                fnv1a(&mut h, &x.to_le_bytes());
+            }
+        }
+        h
+    }
+
+    /// The text its PNG carries under `render::FRAME_MARK_KEY`.
+    pub fn mark(&self) -> String {
+        frame_mark(self.index, self.digest())
+    }
+}
+
+fn frame_mark(index: u64, digest: u64) -> String {
+    format!("frame {index} poses {digest:016x}")
+}
+
 pub fn frame_of(world: &World, index: u64, first_index: u64) -> Frame {
     Frame {
         index,
@@ -107,6 +131,9 @@ pub fn frame_of(world: &World, index: u64, first_index: u64) -> Frame {
 /// Where frames go: nowhere, a renderer on this rank, or the render rank.
 pub trait FrameSink {
     fn publish(&mut self, frame: Frame);
+    /// A resumed run, before its first frame: the digests of the frames
+    /// `0..first` the run it continues published.
+    fn expect_earlier(&mut self, _digests: Vec<u64>) {}
     /// Ends the stream; returns (frames rendered, frames dropped, adapter, notes).
     fn finish(&mut self, last: Frame) -> (u64, u64, Option<String>, Vec<String>);
     /// The render rank's line in `per_rank`, when frames go to another rank.
@@ -134,6 +161,8 @@ pub struct FrameRenderer {
     /// Whether `video` has been given the frames of the run this one resumes
     /// (see [`FrameRenderer::replay_earlier_frames`]).
     replayed: bool,
+    /// `Frame::digest` of each frame the resumed run published.
+    earlier: Vec<u64>,
     pub rendered: u64,
     pub notes: Vec<String>,
 }
@@ -236,6 +265,7 @@ impl FrameRenderer {
             dir,
             video,
             replayed: false,
+            earlier: Vec::new(),
             rendered: 0,
             notes,
         })
@@ -255,11 +285,17 @@ impl FrameRenderer {
             .map_err(|e| e.to_string())
     }
 
+    /// The digests of the frames the resumed run published (see
+    /// `replay_earlier_frames`).
+    pub fn expect_earlier(&mut self, digests: Vec<u64>) {
+        self.earlier = digests;
+    }
+
     pub fn render_frame(&mut self, frame: &Frame) -> Result<(), String> {
         self.replay_earlier_frames(frame.first_index);
         let image = self.draw(frame)?;
         let path = frame_path(&self.dir, frame.index);
-        render::write_png(&path, &image).map_err(|e| e.to_string())?;
+        render::write_png_marked(&path, &image, Some(&frame.mark())).map_err(|e| e.to_string())?;
         if let Some(v) = self.video.as_mut() {
             v.push(&image).map_err(|e| e.to_string())?;
         }
@@ -296,6 +332,11 @@ impl FrameRenderer {
     /// `first` and up: this run renders (and overwrites) them again, so they
     /// are not read. A missing or unreadable file is left out and reported
     /// in one note; it never stops the run. Without ffmpeg nothing is read.
+    ///
+    /// Each PNG must carry the mark of the frame the checkpoint's run
+    /// published at its index (`Frame::mark`, digests from
+    /// `expect_earlier`): a frame drawn by another run in the same folder,
+    /// or left from before a frame the renderer dropped, is left out too.
     fn replay_earlier_frames(&mut self, first: u64) {
         if self.replayed {
             return;
@@ -308,8 +349,18 @@ impl FrameRenderer {
         let mut first_problem = None;
         for index in 0..first {
             let path = frame_path(&self.dir, index);
-            let problem = match render::read_png(&path) {
-                Ok(image) => match video.push(&image) {
+            let expected = self
+                .earlier
+                .get(index as usize)
+                .map(|&d| frame_mark(index, d));
+            let problem = match render::read_png_marked(&path) {
+                Ok((_, mark)) if mark.is_none() || mark != expected => format!(
+                    "{}: not this run's frame (marked {:?}, the checkpoint expects {:?})",
+                    path.display(),
+                    mark.unwrap_or_else(|| "nothing".into()),
+                    expected.unwrap_or_else(|| "no frame".into())
+                ),
+                Ok((image, _)) => match video.push(&image) {
                     Ok(()) => continue,
                     // The scene's [render] size changed between the runs.
                     Err(e @ render::RenderError::FrameSize { .. }) => {
@@ -332,7 +383,8 @@ impl FrameRenderer {
         if let Some(problem) = first_problem {
             let note = format!(
                 "video.mp4: {left_out} of the {first} frames before the resumed run's first \
-                 (frame {first}) are missing or unusable in {} and were left out; first: {problem}",
+                 (frame {first}) are missing, unusable or not this run's in {} and were left out; \
+                 first: {problem}",
                 self.dir.display()
             );
             eprintln!("rigidsim: {note}");
@@ -345,6 +397,9 @@ impl FrameRenderer {
 pub struct InlineFrames(pub FrameRenderer);
 
 impl FrameSink for InlineFrames {
+    fn expect_earlier(&mut self, digests: Vec<u64>) {
+        self.0.expect_earlier(digests);
+    }
     fn publish(&mut self, frame: Frame) {
         if let Err(e) = self.0.render_frame(&frame) {
             self.0
@@ -445,6 +500,23 @@ pub fn run_coordinator(
     // its frames overwrite those the stopped run drew after the checkpoint.
     let first_frame = marks.as_ref().map_or(0, |m| m.frame_index);
     let mut frame_index = first_frame;
+    // What each frame published so far drew, for the checkpoints (see
+    // `FrameRenderer::replay_earlier_frames`).
+    let mut frame_digests: Vec<u64> = marks
+        .as_ref()
+        .map(|m| m.frame_digests.clone())
+        .unwrap_or_default();
+    if render_stride.is_some() && marks.is_some() {
+        frames.expect_earlier(frame_digests.clone());
+    }
+    let publish =
+        |frames: &mut dyn FrameSink, world: &World, index: &mut u64, digests: &mut Vec<u64>| {
+            let frame = frame_of(world, *index, first_frame);
+            digests.truncate(*index as usize);
+            digests.push(frame.digest());
+            frames.publish(frame);
+            *index += 1;
+        };
     // A fresh run samples t = 0; a resumed one continues the trajectory it
     // finds (which already holds the rows up to the checkpoint) or, in a new
     // folder, starts it at the checkpoint's time.
@@ -454,25 +526,28 @@ pub fn run_coordinator(
     }
     if render_stride.is_some() && marks.is_none() {
         let clock = Instant::now();
-        frames.publish(frame_of(&world, frame_index, first_frame));
-        frame_index += 1;
+        publish(frames, &world, &mut frame_index, &mut frame_digests);
         world.stage.render += clock.elapsed().as_secs_f64();
     }
     // Writes the world as it stands; the trajectory is flushed first so the
     // file holds every row up to the checkpoint's time.
-    let write_checkpoint =
-        |world: &World, frame_index: u64, traj: &mut TrajectoryWriter| -> Result<_, RunError> {
-            traj.flush().map_err(|e| io(e, "trajectory.csv"))?;
-            let mut ck = world.checkpoint();
-            ck.run = RunMarks {
-                energy_initial,
-                frame_index,
-                trajectory: traj.mark(),
-            };
-            ck.write(&checkpoint_path)
-                .map_err(|e| io(e, &checkpoint_path.display().to_string()))?;
-            Ok(Some((checkpoint_path.clone(), world.time())))
+    let write_checkpoint = |world: &World,
+                            frame_index: u64,
+                            frame_digests: &[u64],
+                            traj: &mut TrajectoryWriter|
+     -> Result<_, RunError> {
+        traj.flush().map_err(|e| io(e, "trajectory.csv"))?;
+        let mut ck = world.checkpoint();
+        ck.run = RunMarks {
+            energy_initial,
+            frame_index,
+            frame_digests: frame_digests.to_vec(),
+            trajectory: traj.mark(),
         };
+        ck.write(&checkpoint_path)
+            .map_err(|e| io(e, &checkpoint_path.display().to_string()))?;
+        Ok(Some((checkpoint_path.clone(), world.time())))
+    };
 
     let mut end_reason = "duration";
     let mut failure = None;
@@ -493,13 +568,12 @@ pub fn run_coordinator(
         if let Some(stride) = render_stride {
             if s % stride == 0 {
                 let clock = Instant::now();
-                frames.publish(frame_of(&world, frame_index, first_frame));
-                frame_index += 1;
+                publish(frames, &world, &mut frame_index, &mut frame_digests);
                 world.stage.render += clock.elapsed().as_secs_f64();
             }
         }
         if checkpoint_stride.is_some_and(|k| s % k == 0) {
-            last_good = write_checkpoint(&world, frame_index, &mut traj)?;
+            last_good = write_checkpoint(&world, frame_index, &frame_digests, &mut traj)?;
         }
         if s % frame_stride == 0 {
             worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
@@ -530,7 +604,7 @@ pub fn run_coordinator(
             .as_ref()
             .is_some_and(|(p, t)| *p == checkpoint_path && *t == world.time());
         if checkpoint_stride.is_some() && !written_now {
-            last_good = write_checkpoint(&world, frame_index, &mut traj)?;
+            last_good = write_checkpoint(&world, frame_index, &frame_digests, &mut traj)?;
         }
     }
     traj.flush().map_err(|e| io(e, "trajectory.csv"))?;

@@ -903,4 +903,38 @@ fn resumed_run_video_holds_the_whole_run() {
         "{}",
         about_video[0]
     );
+
+    // Frames in the folder that are not the checkpoint's run's: another
+    // frame's image under frame 3's name, and an unmarked PNG under frame
+    // 1's. Each PNG carries the digest of the poses it drew, and the
+    // checkpoint the digests of the frames its run published: both are
+    // left out (before, both went into the video as the run's own).
+    std::fs::copy(
+        whole.join("frames/frame_00004.png"),
+        dir.join("frames/frame_00003.png"),
+    )
+    .unwrap();
+    let image = rigidsim::render::read_png(whole.join("frames/frame_00001.png")).unwrap();
+    rigidsim::render::write_png(dir.join("frames/frame_00001.png"), &image).unwrap();
+    let r = run_rendered(&[s(&scene), "--resume", s(&resume), "--out", s(&dir)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert_eq!(video_frames(&dir.join("video.mp4")), whole_frames - 3);
+    let notes = summary(&dir)["notes"].to_string();
+    assert!(
+        notes.contains("3 of the 5 frames")
+            && notes.contains("frame_00001.png: not this run's frame (marked \\\"nothing\\\""),
+        "{notes}"
+    );
+    // The run's own frames back (from the uninterrupted run, which drew
+    // the same poses): taken again, the video is the whole run's.
+    for k in 1..=3 {
+        let name = format!("frames/frame_{k:05}.png");
+        std::fs::copy(whole.join(&name), dir.join(&name)).unwrap();
+    }
+    let r = run_rendered(&[s(&scene), "--resume", s(&resume), "--out", s(&dir)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(
+        video_frame_hashes(&dir.join("video.mp4")) == video_frame_hashes(&whole.join("video.mp4")),
+        "the frames put back were not taken as the run's own"
+    );
 }

@@ -670,6 +670,11 @@ impl FrameSink for RemoteFrames<'_> {
         self.post(&RenderMessage::Frame(frame));
     }
 
+    fn expect_earlier(&mut self, digests: Vec<u64>) {
+        self.reap();
+        self.post(&RenderMessage::Earlier(digests));
+    }
+
     fn rank_summary(&self) -> Option<RankSummary> {
         let r = self.report.as_ref()?;
         Some(RankSummary {
@@ -736,6 +741,11 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
             report.bytes_received += bytes.len() as u64;
             match decode::<RenderMessage>(&bytes) {
                 Ok(RenderMessage::Frame(f)) => queue.push_back(f),
+                Ok(RenderMessage::Earlier(digests)) => {
+                    if let Some(r) = renderer.as_mut() {
+                        r.expect_earlier(digests);
+                    }
+                }
                 Ok(RenderMessage::Finish(last)) => finish = Some(last),
                 Err(e) => eprintln!("rigidsim: renderer: {e}"),
             }

@@ -63,6 +63,9 @@ pub struct WorkerReport {
 pub enum RenderMessage {
     /// Body poses at a screen update (render message of the thesis).
     Frame(Frame),
+    /// A resumed run, before its first frame: the digests of the frames
+    /// the run it continues published (`FrameRenderer::expect_earlier`).
+    Earlier(Vec<u64>),
     /// The final state: write `preview.png`, close the video, report.
     Finish(Frame),
 }

@@ -65,6 +65,9 @@ pub struct RunMarks {
     pub energy_initial: f64,
     /// Index of the next frame published to the renderer.
     pub frame_index: u64,
+    /// `Frame::digest` of every frame published before `frame_index`: a
+    /// resumed run puts in its video only the PNGs whose mark matches.
+    pub frame_digests: Vec<u64>,
     /// What `trajectory.csv` held when the checkpoint was written: a resumed
     /// run continues that file only if it still begins with those bytes.
     pub trajectory: TrajectoryMark,

@@ -34,7 +34,7 @@ use std::path::PathBuf;
 
 pub use camera::{Camera, look_at_scene};
 pub use gpu::Renderer;
-pub use image::{Image, read_png, write_png};
+pub use image::{FRAME_MARK_KEY, Image, read_png, read_png_marked, write_png, write_png_marked};
 pub use mesh::Mesh;
 pub use video::VideoWriter;
 
