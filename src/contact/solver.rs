@@ -145,6 +145,10 @@ pub struct SolveStats {
     /// sweeps: solved again by Dantzig's method below `DANTZIG_MAX_ROWS`,
     /// kept above it.
     pub iterative_unconverged: u32,
+    /// Solves below `ITERATIVE_MIN_ROWS` that Dantzig's method failed on
+    /// (exact and compliant) and the sequential impulses then solved to
+    /// the LCP's conditions (not counted in `failed`).
+    pub iterative_rescues: u32,
 }
 
 /// Failure examples kept in `SolveStats::failures`.
@@ -171,6 +175,7 @@ impl SolveStats {
         self.compliant_solves += o.compliant_solves;
         self.iterative_solves += o.iterative_solves;
         self.iterative_unconverged += o.iterative_unconverged;
+        self.iterative_rescues += o.iterative_rescues;
     }
 }
 
@@ -311,7 +316,13 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
         .contacts
         .iter()
         .map(|c| gap_curvature(task, c, &v, &w))
-        .map(|k| if k.abs() * task.dt < SEPARATING_EPS { 0.0 } else { k })
+        .map(|k| {
+            if k.abs() * task.dt < SEPARATING_EPS {
+                0.0
+            } else {
+                k
+            }
+        })
         .collect();
     let needed = task.contacts.iter().zip(&curvature).any(|(c, k)| {
         let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
@@ -433,6 +444,8 @@ fn solve_phase(
     // Each row's velocity-product term over the interval (`gap_curvature`):
     // the energy guard counts it as velocity the row already has.
     let mut bias = Vec::new();
+    // Each row's coefficient of restitution where the impact applies one.
+    let mut restitution = Vec::new();
     let resting = matches!(phase, Phase::Resting { .. });
     for (ci, c) in task.contacts.iter().enumerate() {
         let (a, b) = (c.a as usize, c.b as usize);
@@ -460,6 +473,10 @@ fn solve_phase(
             Phase::Resting { curvature, .. } => curvature[ci] * task.dt,
             Phase::Impact => 0.0,
         });
+        restitution.push(match phase {
+            Phase::Impact if vn < -task.restitution_threshold => c.restitution,
+            _ => 0.0,
+        });
         let ni = rows.len();
         rows.push(normal);
         rhs.push(b_n);
@@ -479,6 +496,7 @@ fn solve_phase(
                 });
                 rhs.push(row.velocity(v, w));
                 bias.push(0.0);
+                restitution.push(0.0);
                 rows.push(row);
                 // Friction bounds are coefficients of the normal impulse: |p_t| ≤ μ p_N.
                 lo.push(-c.friction);
@@ -572,18 +590,79 @@ fn solve_phase(
                 stats.compliant_solves += 1;
                 sol.x
             }
-            Err(_) => {
-                stats.record_failure(m, e.to_string());
-                unconverged.unwrap_or_else(|| fallback(&a, m, &rhs, &lo, &hi, &findex))
-            }
+            Err(_) => match unconverged
+                .is_none()
+                .then(|| rescue(&rows, &a, &rhs, &lo, &hi, &findex, &warm, v.len()))
+                .flatten()
+            {
+                Some(p) => {
+                    stats.iterative_rescues += 1;
+                    p
+                }
+                None => {
+                    stats.record_failure(m, e.to_string());
+                    unconverged.unwrap_or_else(|| fallback(&a, m, &rhs, &lo, &hi, &findex))
+                }
+            },
         },
     };
     let diag: Vec<f64> = (0..m).map(|i| a[i * m + i]).collect();
     let p = energy_guard(&diag, &rows, (v, w, &bias), p, stats, |vel| {
-        solve_normal_rows(&a, m, vel, &findex)
+        safe_answers(&a, m, vel, &lo, &hi, &findex, &restitution)
     });
     let sum = normal_sum(&p);
     (rows, p, sum)
+}
+
+/// Answers to a contact system that add no energy, for the energy guard,
+/// best first; `vel` is each row's own velocity (its target with no
+/// restitution, overlap mending or separation allowance).
+///
+/// With e = 0 the LCP w = A p + vel, friction bounds included, cannot add
+/// energy: ΔKE = pᵀvel + ½pᵀAp = pᵀw − ½pᵀAp, where pᵀw is zero on normal
+/// rows and ≤ 0 on friction rows at their bounds. Newton's restitution
+/// (target −e·v_N) with friction can (Kane and Levinson's paradox): in the
+/// 200-body pours every guard rejection was a nut's single contact with
+/// friction at impact. So, in turn:
+/// 1. Poisson's restitution: that inelastic answer (the compression),
+///    then each contact's normal impulse again times its e (a rebound with
+///    no friction);
+/// 2. the inelastic answer itself;
+/// 3. the frictionless, inelastic LCP on the normal rows.
+fn safe_answers(
+    a: &[f64],
+    m: usize,
+    vel: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    findex: &[Option<usize>],
+    restitution: &[f64],
+) -> Vec<(&'static str, Vec<f64>)> {
+    let mut out = Vec::new();
+    let inelastic = lcp::LcpProblem {
+        a,
+        b: vel,
+        lo,
+        hi,
+        findex,
+    };
+    if let Ok(sol) = lcp::solve(&inelastic) {
+        if restitution.iter().any(|&e| e > 0.0) {
+            // `restitution` is zero on friction rows.
+            let rebound: Vec<f64> = sol
+                .x
+                .iter()
+                .zip(restitution)
+                .map(|(p, e)| p * (1.0 + e))
+                .collect();
+            out.push(("Poisson's restitution", rebound));
+        }
+        out.push(("the inelastic answer with friction", sol.x));
+    }
+    if let Some(p) = solve_normal_rows(a, m, vel, findex) {
+        out.push(("the frictionless inelastic answer", p));
+    }
+    out
 }
 
 /// The energy guard of an iterative solve; its safe answer is the
@@ -606,7 +685,7 @@ fn guard_iterative(
             .collect();
         let zero = vec![0.0; m];
         let (p, _) = sequential_impulses(rows, diag, vel, &zero, &normal_hi, findex, &zero, bodies);
-        Some(p)
+        vec![("the frictionless inelastic answer", p)]
     })
 }
 
@@ -665,7 +744,7 @@ fn energy_guard(
     (v, w, bias): Velocities,
     p: Vec<f64>,
     stats: &mut SolveStats,
-    safe_solve: impl FnOnce(&[f64]) -> Option<Vec<f64>>,
+    safe_solves: impl FnOnce(&[f64]) -> Vec<(&'static str, Vec<f64>)>,
 ) -> Vec<f64> {
     let m = rows.len();
     let gain = |x: &[f64]| {
@@ -692,18 +771,21 @@ fn energy_guard(
         .filter(|&i| diag[i] > 0.0)
         .map(|i| 0.5 * vel[i] * vel[i] / diag[i])
         .sum();
-    if !(gain(&p) > ENERGY_GAIN_ALLOWED * scale + 1e-12) {
+    let allowed = |x: &[f64]| gain(x) <= ENERGY_GAIN_ALLOWED * scale + 1e-12;
+    if allowed(&p) {
         return p;
     }
+    let added = gain(&p);
+    // The first safe answer that passes; if none does (rounding), nothing
+    // is applied this step.
+    let (name, safe) = safe_solves(&vel)
+        .into_iter()
+        .find(|(_, x)| allowed(x))
+        .unwrap_or(("nothing", vec![0.0; m]));
     stats.record_failure(
         m,
-        format!("solution added {:.3e} J of kinetic energy", gain(&p)),
+        format!("solution added {added:.3e} J of kinetic energy; {name} applied instead"),
     );
-    let safe = safe_solve(&vel).unwrap_or_else(|| vec![0.0; m]);
-    if !(gain(&safe) <= ENERGY_GAIN_ALLOWED * scale + 1e-12) {
-        // Even the safe solve failed numerically: apply nothing this step.
-        return vec![0.0; m];
-    }
     safe
 }
 
@@ -749,6 +831,28 @@ fn friction_direction(
 /// normal rows alone exactly, then the whole system with the friction bounds
 /// frozen at μ times those normal impulses (a boxed LCP with constant
 /// bounds). Projected Gauss–Seidel is the last resort.
+/// The sequential impulses with the subspace step (as for large islands)
+/// on a system Dantzig's method failed on, exact and compliant: where its
+/// friction passes cycle (the bounds follow normal impulses that move with
+/// them), the iterative solve can still meet the conditions. Its answer if
+/// it does, to `ITERATIVE_RESIDUAL` on the `ITERATIVE_COMPLIANCE` system.
+#[allow(clippy::too_many_arguments)]
+fn rescue(
+    rows: &[Row],
+    a: &[f64],
+    b: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    findex: &[Option<usize>],
+    warm: &[f64],
+    bodies: usize,
+) -> Option<Vec<f64>> {
+    let m = rows.len();
+    let diag: Vec<f64> = (0..m).map(|i| a[i * m + i]).collect();
+    let (p, met) = sequential_impulses(rows, &diag, b, lo, hi, findex, warm, bodies);
+    met.then_some(p)
+}
+
 fn fallback(
     a: &[f64],
     m: usize,
@@ -1263,10 +1367,109 @@ mod tests {
             velocities,
             vec![x, 3.0 - x],
             &mut stats,
-            |vel| solve_normal_rows(&a, m, vel, &[None, None]),
+            |vel| {
+                solve_normal_rows(&a, m, vel, &[None, None])
+                    .map(|p| vec![("the frictionless inelastic answer", p)])
+                    .unwrap_or_default()
+            },
         );
         assert_eq!(stats.failed, 1, "the guard let {p:?} through");
         // The safe answer stops the body (inelastic): net impulse 1 N s.
         assert!((p[0] + p[1] - 1.0).abs() < 1e-9, "{p:?}");
+    }
+
+    /// A 1 m rod at 50° to a fixed floor, its lower end touching, moving at
+    /// (2, 0, −2) m/s: one contact, e = 0.9, μ = 1. Newton's restitution
+    /// with sticking friction adds 0.095 J here (Kane and Levinson's
+    /// paradox); the guard must apply Poisson's restitution instead, not
+    /// the frictionless inelastic answer: the compression impulse of the
+    /// inelastic solve with friction, then 0.9 times its normal part.
+    #[test]
+    fn newton_restitution_that_adds_energy_gives_way_to_poisson() {
+        let rod = |restitution: f64| {
+            let theta = 50f64.to_radians();
+            let (l, m) = (1.0, 1.0);
+            let dir = Vector3::new(theta.cos(), 0.0, theta.sin());
+            let rot = nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), -theta);
+            let (axial, across) = (m * 0.01 / 6.0, m * l * l / 12.0);
+            let local =
+                Matrix3::from_diagonal(&Vector3::new(1.0 / axial, 1.0 / across, 1.0 / across));
+            let inv_inertia = rot.matrix() * local * rot.matrix().transpose();
+            let floor = IslandBody {
+                id: BodyId(0),
+                inv_mass: 0.0,
+                inv_inertia: Matrix3::zeros(),
+                position: Vector3::new(0.0, 0.0, -0.1),
+                velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+                external_dv: Vector3::zeros(),
+                external_dw: Vector3::zeros(),
+            };
+            let body = IslandBody {
+                id: BodyId(1),
+                inv_mass: 1.0 / m,
+                inv_inertia,
+                position: dir * (l / 2.0),
+                velocity: Vector3::new(2.0, 0.0, -2.0),
+                ..floor.clone()
+            };
+            IslandTask {
+                bodies: vec![floor, body],
+                contacts: vec![IslandContact {
+                    a: 1,
+                    b: 0,
+                    point: Vector3::zeros(),
+                    normal: Vector3::z(),
+                    restitution,
+                    friction: 1.0,
+                    separation: 0.0,
+                    warm_force: 0.0,
+                    warm_friction: Vector3::zeros(),
+                    turns: NormalTurn::WithB,
+                }],
+                dt: 0.01,
+                restitution_threshold: 0.05,
+                iterative_min_rows: 300,
+            }
+        };
+        let energy = |t: &IslandTask, r: &IslandResult| {
+            let b = &t.bodies[1];
+            let v = b.velocity + r.impulse[1] * b.inv_mass;
+            let w = b.angular_velocity + b.inv_inertia * r.angular_impulse[1];
+            let inertia = b.inv_inertia.try_inverse().unwrap();
+            0.5 * v.norm_squared() / b.inv_mass + 0.5 * w.dot(&(inertia * w))
+        };
+        let (elastic, inelastic) = (rod(0.9), rod(0.0));
+        let before = 0.5 * elastic.bodies[1].velocity.norm_squared();
+        let r = solve_island(&elastic);
+        assert_eq!(r.stats.failed, 1, "{:?}", r.stats.failures);
+        assert!(
+            r.stats.failures[0]
+                .1
+                .contains("Poisson's restitution applied"),
+            "{:?}",
+            r.stats.failures
+        );
+        let after = energy(&elastic, &r);
+        assert!(
+            after <= before,
+            "{after} J after the impact against {before} J"
+        );
+        // The inelastic solve with friction adds nothing and is used as is.
+        let c = solve_island(&inelastic);
+        assert_eq!(c.stats.failed, 0, "{:?}", c.stats.failures);
+        assert!(energy(&inelastic, &c) < after);
+        // Poisson: the same friction impulse, 1.9 times the normal one.
+        let (pe, pc) = (r.impulse[1], c.impulse[1]);
+        assert!(
+            (pe.z - 1.9 * pc.z).abs() <= 1e-12 * pc.z,
+            "{pe:?} against {pc:?}"
+        );
+        assert!((pe.x - pc.x).abs() <= 1e-12 * pc.z, "{pe:?} against {pc:?}");
+        // It bounces: the contact point leaves the floor.
+        let b = &elastic.bodies[1];
+        let w = b.inv_inertia * r.angular_impulse[1];
+        let vn = (b.velocity + pe * b.inv_mass + w.cross(&-b.position)).z;
+        assert!(vn > 0.5, "the end leaves at {vn} m/s");
     }
 }
