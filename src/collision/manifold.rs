@@ -50,11 +50,11 @@ pub struct ContactPoint {
 }
 
 /// Which features the contact normal belongs to, so the contact solve can
-/// tell how fast it turns: with A's face (or A's side of a vertex–feature
-/// contact), with B's, or as the cross product of two edges, one on each
-/// body (world directions). Two edges sliding across each other while both
+/// tell how fast it turns: A's (its face, or whatever feature B's vertex
+/// touches), B's, or the cross product of two edges, one on each body
+/// (world directions; edge on edge, or an edge running off a face). Two edges sliding across each other while both
 /// bodies spin bend the gap at up to 2·ṅ·(relative velocity): 245 m/s² for
-/// two light hulls spinning at 20 rad/s (docs/stability.md, fragile 1).
+/// two light hulls spinning at 20 rad/s (docs/stability.md, *Random scenes*).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum NormalTurn {
     WithA,

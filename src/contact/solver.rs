@@ -387,7 +387,7 @@ fn apply(row: &Row, p: f64, lin: &mut [Vector3<f64>], ang: &mut [Vector3<f64>]) 
 /// resting solve's prediction J·(v + h·a) misses it; where it is large (two
 /// spinning hulls sliding edge on edge: −245 m/s²) the gap closed again
 /// 28 µs after every impact, and a step took 256 impact events of 0.1 µm
-/// each (docs/stability.md, fragile 1).
+/// each (docs/stability.md, *Random scenes*).
 fn gap_curvature(
     task: &IslandTask,
     c: &IslandContact,
