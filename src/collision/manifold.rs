@@ -52,7 +52,7 @@ pub struct ContactPoint {
 /// Which features the contact normal belongs to, so the contact solve can
 /// tell how fast it turns: A's (its face, or whatever feature B's vertex
 /// touches), B's, or the cross product of two edges, one on each body
-/// (world directions; edge on edge, or an edge running off a face). Two edges sliding across each other while both
+/// (world directions). Two edges sliding across each other while both
 /// bodies spin bend the gap at up to 2·ṅ·(relative velocity): 245 m/s² for
 /// two light hulls spinning at 20 rad/s (docs/stability.md, *Random scenes*).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -116,71 +116,44 @@ pub fn contact_points(
         }
         _ => NormalTurn::WithB,
     };
-    // Each pair of points, and where an edge end was cut by a face's side,
-    // the two edges crossing there (A's first).
-    type Crossing = Option<(Vector3<f64>, Vector3<f64>)>;
-    let mut pairs: Vec<(Vector3<f64>, Vector3<f64>, Crossing)> = match (&fa, &fb) {
+    let mut pairs: Vec<(Vector3<f64>, Vector3<f64>)> = match (&fa, &fb) {
         (Support::Face(pa, na, oa), Support::Face(pb, nb, ob)) => {
             if na.dot(&n).abs() > nb.dot(&n).abs() {
                 clip_polygon(pb.clone(), pa, na)
                     .into_iter()
-                    .map(|y| (along_to_plane(y, &n, na, *oa), y, None))
+                    .map(|y| (along_to_plane(y, &n, na, *oa), y))
                     .collect()
             } else {
                 clip_polygon(pa.clone(), pb, nb)
                     .into_iter()
-                    .map(|x| (x, along_to_plane(x, &n, nb, *ob), None))
+                    .map(|x| (x, along_to_plane(x, &n, nb, *ob)))
                     .collect()
             }
         }
         (Support::Face(pa, na, oa), Support::Edge(q0, q1)) => clip_segment(q0, q1, pa, na)
             .into_iter()
-            .map(|(y, cut)| (along_to_plane(y, &n, na, *oa), y, cut.map(|e| (e, q1 - q0))))
+            .map(|y| (along_to_plane(y, &n, na, *oa), y))
             .collect(),
         (Support::Edge(p0, p1), Support::Face(pb, nb, ob)) => clip_segment(p0, p1, pb, nb)
             .into_iter()
-            .map(|(x, cut)| (x, along_to_plane(x, &n, nb, *ob), cut.map(|e| (p1 - p0, e))))
+            .map(|x| (x, along_to_plane(x, &n, nb, *ob)))
             .collect(),
-        (Support::Edge(p0, p1), Support::Edge(q0, q1)) => edge_edge(p0, p1, q0, q1)
-            .into_iter()
-            .map(|(x, y)| (x, y, None))
-            .collect(),
-        (Support::Vertex(x), _) => vec![(*x, onto_b_level(*x), None)],
-        (_, Support::Vertex(y)) => vec![(onto_a_level(*y), *y, None)],
+        (Support::Edge(p0, p1), Support::Edge(q0, q1)) => edge_edge(p0, p1, q0, q1),
+        (Support::Vertex(x), _) => vec![(*x, onto_b_level(*x))],
+        (_, Support::Vertex(y)) => vec![(onto_a_level(*y), *y)],
     };
     if pairs.is_empty() {
         // Clipping can come back empty only through rounding at a corner.
-        pairs.push((low_a, onto_b_level(low_a), None));
+        pairs.push((low_a, onto_b_level(low_a)));
     }
 
     let points: Vec<ContactPoint> = pairs
         .into_iter()
-        .map(|(pa, pb, crossing)| {
-            // An edge that lies across a face (within FACE_CONTACT_ANGLE)
-            // and runs off it touches at the face's edge: the two edges
-            // cross there, and as they slide the crossing runs along the
-            // tilted edge, so the gap moves at s·tan(tilt) beyond what the
-            // points' own velocities say. The normal of the two edges
-            // carries that (1 mm/s for a hull sliding at 1 m/s in a random
-            // scene, which sank 0.1 µm past every impact). Face normal
-            // where the edges are parallel.
-            let crossed = crossing.and_then(|(ea, eb)| {
-                let m = ea.normalize().cross(&eb.normalize());
-                (m.norm() > FACE_CONTACT_ANGLE.sin()).then(|| {
-                    let m = m.normalize();
-                    (
-                        if m.dot(&n) >= 0.0 { m } else { -m },
-                        NormalTurn::Edges(ea, eb),
-                    )
-                })
-            });
-            let (normal, turns) = crossed.unwrap_or((n, turns));
-            ContactPoint {
-                point: (pa + pb) / 2.0,
-                normal,
-                separation: n.dot(&(pa - pb)),
-                turns,
-            }
+        .map(|(pa, pb)| ContactPoint {
+            point: (pa + pb) / 2.0,
+            normal: n,
+            separation: n.dot(&(pa - pb)),
+            turns,
         })
         .collect();
     let closest = points
@@ -413,36 +386,29 @@ fn clip_polygon(
     subject
 }
 
-/// Segment `p0 p1` clipped to the prism over `clipper`: its surviving ends,
-/// each with the direction of the clipper's edge that cut it there (`None`
-/// where the segment's own end survives).
+/// Segment `p0 p1` clipped to the prism over `clipper`: its surviving ends.
 fn clip_segment(
     p0: &Vector3<f64>,
     p1: &Vector3<f64>,
     clipper: &[Vector3<f64>],
     normal: &Vector3<f64>,
-) -> Vec<(Vector3<f64>, Option<Vector3<f64>>)> {
+) -> Vec<Vector3<f64>> {
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    let (mut cut_lo, mut cut_hi) = (None, None);
-    let k = clipper.len();
-    for (i, (m, c)) in side_planes(clipper, normal).into_iter().enumerate() {
+    for (m, c) in side_planes(clipper, normal) {
         let (d0, d1) = (m.dot(p0) - c, m.dot(p1) - c);
         if d0 < 0.0 && d1 < 0.0 {
             return Vec::new();
         }
-        let side = clipper[(i + 1) % k] - clipper[i];
-        if d0 < 0.0 && d0 / (d0 - d1) > lo {
-            lo = d0 / (d0 - d1);
-            cut_lo = Some(side);
-        } else if d1 < 0.0 && d0 / (d0 - d1) < hi {
-            hi = d0 / (d0 - d1);
-            cut_hi = Some(side);
+        if d0 < 0.0 {
+            lo = lo.max(d0 / (d0 - d1));
+        } else if d1 < 0.0 {
+            hi = hi.min(d0 / (d0 - d1));
         }
     }
     if lo > hi {
         return Vec::new();
     }
-    vec![(p0 + (p1 - p0) * lo, cut_lo), (p0 + (p1 - p0) * hi, cut_hi)]
+    vec![p0 + (p1 - p0) * lo, p0 + (p1 - p0) * hi]
 }
 
 /// Two edges: their common stretch when (nearly) parallel, else their
