@@ -312,10 +312,16 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
     // Below SEPARATING_EPS over the step it is rounding (a resting stack's
     // spins are 1e-9 rad/s): left out, so that near-degenerate resting
     // systems (1 kg under 10 000 kg) see exactly the targets they did.
+    let spin_rate: Vec<Vector3<f64>> = task
+        .bodies
+        .iter()
+        .zip(&w)
+        .map(|(b, w)| gyroscopic(b, w))
+        .collect();
     let curvature: Vec<f64> = task
         .contacts
         .iter()
-        .map(|c| gap_curvature(task, c, &v, &w))
+        .map(|c| gap_curvature(task, c, &v, &w, &spin_rate))
         .map(|k| {
             if k.abs() * task.dt < SEPARATING_EPS {
                 0.0
@@ -388,26 +394,22 @@ fn apply(row: &Row, p: f64, lin: &mut [Vector3<f64>], ang: &mut [Vector3<f64>]) 
 /// spinning hulls sliding edge on edge: −245 m/s²) the gap closed again
 /// 28 µs after every impact, and a step took 256 impact events of 0.1 µm
 /// each (docs/stability.md, *Random scenes*).
+///
+/// `spin_rate` is each body's `gyroscopic` ω̇.
 fn gap_curvature(
     task: &IslandTask,
     c: &IslandContact,
     v: &[Vector3<f64>],
     w: &[Vector3<f64>],
+    spin_rate: &[Vector3<f64>],
 ) -> f64 {
-    let (ba, bb) = (&task.bodies[c.a as usize], &task.bodies[c.b as usize]);
-    let (wa, wb) = (w[c.a as usize], w[c.b as usize]);
+    let (ia, ib) = (c.a as usize, c.b as usize);
+    let (ba, bb) = (&task.bodies[ia], &task.bodies[ib]);
+    let (wa, wb) = (w[ia], w[ib]);
     let (ra, rb) = (c.point - ba.position, c.point - bb.position);
-    // Torque-free spin still turns ω as the inertia turns: I ω̇ = (I ω) × ω.
-    let gyroscopic = |body: &IslandBody, w: &Vector3<f64>| -> Vector3<f64> {
-        match body.inv_inertia.try_inverse() {
-            Some(inertia) => body.inv_inertia * (inertia * w).cross(w),
-            None => Vector3::zeros(),
-        }
-    };
-    let accel = |body: &IslandBody, w: &Vector3<f64>, r: &Vector3<f64>| {
-        gyroscopic(body, w).cross(r) + w.cross(&w.cross(r))
-    };
-    let relative_velocity = (v[c.a as usize] + wa.cross(&ra)) - (v[c.b as usize] + wb.cross(&rb));
+    let accel =
+        |i: usize, w: &Vector3<f64>, r: &Vector3<f64>| spin_rate[i].cross(r) + w.cross(&w.cross(r));
+    let relative_velocity = (v[ia] + wa.cross(&ra)) - (v[ib] + wb.cross(&rb));
     let n = c.normal;
     let turning = match c.turns {
         NormalTurn::WithA => wa.cross(&n),
@@ -421,7 +423,16 @@ fn gap_curvature(
             if u.dot(&n) >= 0.0 { du } else { -du }
         }
     };
-    n.dot(&(accel(ba, &wa, &ra) - accel(bb, &wb, &rb))) + 2.0 * turning.dot(&relative_velocity)
+    n.dot(&(accel(ia, &wa, &ra) - accel(ib, &wb, &rb))) + 2.0 * turning.dot(&relative_velocity)
+}
+
+/// How fast torque-free spin still turns ω as the inertia turns:
+/// I ω̇ = (I ω) × ω. Zero for fixed and driven bodies (no inverse inertia).
+fn gyroscopic(body: &IslandBody, w: &Vector3<f64>) -> Vector3<f64> {
+    match body.inv_inertia.try_inverse() {
+        Some(inertia) => body.inv_inertia * (inertia * w).cross(w),
+        None => Vector3::zeros(),
+    }
 }
 
 /// Builds and solves the LCP of one phase. Returns the rows, their impulses
@@ -528,6 +539,8 @@ fn solve_phase(
         return (rows, vec![p], p);
     }
 
+    // A_ii, for the iterative solve and the energy guard.
+    let diag: Vec<f64> = rows.iter().map(|r| r.coupling(r)).collect();
     // Large islands (stacks of 50, piles): sequential impulses with the
     // subspace step on the rows, no dense matrix (see `ITERATIVE_MIN_ROWS`).
     // An answer that misses the conditions is handed to Dantzig's method
@@ -535,7 +548,6 @@ fn solve_phase(
     let mut unconverged = None;
     if m >= task.iterative_min_rows as usize {
         stats.iterative_solves += 1;
-        let diag: Vec<f64> = rows.iter().map(|r| r.coupling(r)).collect();
         let (p, met) = sequential_impulses(&rows, &diag, &rhs, &lo, &hi, &findex, &warm, v.len());
         if !met {
             stats.iterative_unconverged += 1;
@@ -590,10 +602,16 @@ fn solve_phase(
                 stats.compliant_solves += 1;
                 sol.x
             }
+            // Where Dantzig's friction passes cycle on both systems (the
+            // bounds follow normal impulses that move with them), the
+            // sequential impulses with the subspace step may still meet
+            // the conditions (to `ITERATIVE_RESIDUAL` on the
+            // `ITERATIVE_COMPLIANCE` system): their answer if they do.
             Err(_) => match unconverged
                 .is_none()
-                .then(|| rescue(&rows, &a, &rhs, &lo, &hi, &findex, &warm, v.len()))
-                .flatten()
+                .then(|| sequential_impulses(&rows, &diag, &rhs, &lo, &hi, &findex, &warm, v.len()))
+                .filter(|&(_, met)| met)
+                .map(|(p, _)| p)
             {
                 Some(p) => {
                     stats.iterative_rescues += 1;
@@ -606,7 +624,6 @@ fn solve_phase(
             },
         },
     };
-    let diag: Vec<f64> = (0..m).map(|i| a[i * m + i]).collect();
     let p = energy_guard(&diag, &rows, (v, w, &bias), p, stats, |vel| {
         safe_answers(&a, m, vel, &lo, &hi, &findex, &restitution)
     });
@@ -831,28 +848,6 @@ fn friction_direction(
 /// normal rows alone exactly, then the whole system with the friction bounds
 /// frozen at μ times those normal impulses (a boxed LCP with constant
 /// bounds). Projected Gauss–Seidel is the last resort.
-/// The sequential impulses with the subspace step (as for large islands)
-/// on a system Dantzig's method failed on, exact and compliant: where its
-/// friction passes cycle (the bounds follow normal impulses that move with
-/// them), the iterative solve can still meet the conditions. Its answer if
-/// it does, to `ITERATIVE_RESIDUAL` on the `ITERATIVE_COMPLIANCE` system.
-#[allow(clippy::too_many_arguments)]
-fn rescue(
-    rows: &[Row],
-    a: &[f64],
-    b: &[f64],
-    lo: &[f64],
-    hi: &[f64],
-    findex: &[Option<usize>],
-    warm: &[f64],
-    bodies: usize,
-) -> Option<Vec<f64>> {
-    let m = rows.len();
-    let diag: Vec<f64> = (0..m).map(|i| a[i * m + i]).collect();
-    let (p, met) = sequential_impulses(rows, &diag, b, lo, hi, findex, warm, bodies);
-    met.then_some(p)
-}
-
 fn fallback(
     a: &[f64],
     m: usize,
