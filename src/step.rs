@@ -19,7 +19,7 @@
 
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::broadphase::{self, SphereProxy};
-use crate::collision::manifold::ContactPoint;
+use crate::collision::manifold::{ContactPoint, NormalTurn};
 use crate::collision::narrowphase::{
     self, CONTACT_TOLERANCE, CachedFeatures, PairResult, PairTask,
 };
@@ -284,13 +284,16 @@ struct Segment {
     torque: Vector3<f64>,
 }
 
-/// An overlap that calls for a rollback: beyond the contact tolerance (or
-/// with no contact points to resolve it), and deeper than the pair already
-/// was when its segment began. An overlap carried in (rounding, or one left
-/// by a step that could not resolve it) is mended by the resting solve, not
-/// by rolling back to a moment that has already passed.
-fn overlaps_more(r: &PairResult, carried: f64) -> bool {
-    r.needs_rollback(CONTACT_TOLERANCE) && (r.contacts.is_empty() || r.depth > carried + TOI_GAP)
+/// When each pair's contacts were last solved (the step's start, or an
+/// impact's τ, seconds into the step) and its deepest overlap then: an
+/// overlap its points already had then is carried, not new
+/// (`World::sinking`). Pairs not listed carried none.
+type SolvedSince = HashMap<(u32, u32), Since>;
+
+#[derive(Clone, Copy)]
+struct Since {
+    time: f64,
+    deepest: f64,
 }
 
 /// A body state's pose, as narrowphase takes it.
@@ -410,11 +413,11 @@ impl World {
 
         // build_islands + solve_islands on the contacts touching now.
         let touching = std::mem::take(&mut self.touching);
-        let mut carried: HashMap<(u32, u32), f64> = touching
+        let mut since: SolvedSince = touching
             .iter()
             .map(|t| {
                 let deepest = t.points.iter().map(|p| -p.separation).fold(0.0, f64::max);
-                ((t.a.0, t.b.0), deepest)
+                ((t.a.0, t.b.0), Since { time: 0.0, deepest })
             })
             .collect();
         let all_moving: Vec<usize> = (0..n).filter(|&i| self.moving(i)).collect();
@@ -457,15 +460,8 @@ impl World {
         let mut toi_cache: HashMap<(u32, u32), Option<f64>> = HashMap::new();
         let budget = MIN_EVENTS_PER_STEP.max(EVENTS_PER_MOVING_BODY * all_moving.len());
         loop {
-            let violation = self.earliest_impact(
-                &pairs,
-                &results,
-                &seg,
-                h,
-                &accepted,
-                &mut toi_cache,
-                &carried,
-            );
+            let violation =
+                self.earliest_impact(&pairs, &results, &seg, h, &accepted, &mut toi_cache, &since);
             let Some((mut pair, mut tau)) = violation else {
                 break;
             };
@@ -484,7 +480,7 @@ impl World {
             // hull went 1.3 mm into the hull). Its own impact comes first.
             for _ in 0..MAX_EARLIER_IMPACTS {
                 let Some(earlier) =
-                    self.earlier_impact(pair, tau, &group_pairs, &at_tau, &seg, &carried)
+                    self.earlier_impact(pair, tau, &group_pairs, &at_tau, &seg, &since)
                 else {
                     break;
                 };
@@ -514,7 +510,8 @@ impl World {
                 }
             }
             for (k, r) in group_pairs.iter().zip(&at_tau) {
-                carried.insert(*k, if r.penetrating { r.depth } else { 0.0 });
+                let deepest = if r.penetrating { r.depth } else { 0.0 };
+                since.insert(*k, Since { time: tau, deepest });
             }
             let touching_now = self.touching_from(&group_pairs, &at_tau);
             let woken = self.wake_touched(&touching_now, &mut seg, tau, t0);
@@ -831,7 +828,7 @@ impl World {
         h: f64,
         accepted: &[(u32, u32)],
         cache: &mut HashMap<(u32, u32), Option<f64>>,
-        base: &HashMap<(u32, u32), f64>,
+        since: &SolvedSince,
     ) -> Option<((u32, u32), f64)> {
         let mut best: Option<((u32, u32), f64)> = None;
         for (k, r) in pairs.iter().zip(results) {
@@ -841,7 +838,7 @@ impl World {
             let tau = match cache.get(k) {
                 Some(&cached) => cached,
                 None => {
-                    let tau = self.time_of_impact(*k, r, seg, h, base);
+                    let tau = self.time_of_impact(*k, r, seg, h, since);
                     cache.insert(*k, tau);
                     tau
                 }
@@ -864,21 +861,103 @@ impl World {
         r: &PairResult,
         seg: &[Segment],
         h: f64,
-        base: &HashMap<(u32, u32), f64>,
+        since: &SolvedSince,
     ) -> Option<f64> {
         let (a, b) = (k.0 as usize, k.1 as usize);
         let start = seg[a].time.max(seg[b].time);
-        let carried = base.get(&k).copied().unwrap_or(0.0);
-        let interval = if overlaps_more(r, carried) {
+        let since = since.get(&k).copied();
+        let interval = if self.overlaps_more((a, b), r, h, seg, since) {
             Some(
-                self.first_overlap_sample(a, b, seg, start, h, carried)
+                self.first_overlap_sample(a, b, seg, start, h, since)
                     .unwrap_or((start, h)),
             )
         } else {
             // No overlap at the end: a fast pair may still have crossed.
-            self.first_overlap_sample(a, b, seg, start, h, carried)
+            self.first_overlap_sample(a, b, seg, start, h, since)
         };
-        interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi, carried))
+        interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi, since))
+    }
+
+    /// An overlap that calls for a rollback: beyond the contact tolerance (or
+    /// with no contact points to resolve it), with a contact point deeper
+    /// than it was when the pair was last solved (`sinking`). An overlap
+    /// carried in (rounding, or one left by a step that could not resolve
+    /// it) is mended by the overlap recovery, not by rolling back to a
+    /// moment that has already passed.
+    fn overlaps_more(
+        &self,
+        (a, b): (usize, usize),
+        r: &PairResult,
+        t: f64,
+        seg: &[Segment],
+        since: Option<Since>,
+    ) -> bool {
+        r.needs_rollback(CONTACT_TOLERANCE)
+            && (r.contacts.is_empty() || self.sinking((a, b), r, t, seg, since) > TOI_GAP)
+    }
+
+    /// How much deeper the pair's deepest-sinking contact point is at `t`
+    /// (result `r`) than the same two body points were at `since`, when the
+    /// pair was last solved; a point apart then carried no overlap, and none
+    /// carried more than the pair's deepest point then (the old measure, so
+    /// every rollback it called for is still called for). Before
+    /// session 7 the pair's deepest overlap then was the measure for every
+    /// point, so a new point of a pair already 7 µm deep landed 7 µm deep
+    /// unseen: a bolt rolling on the 40-gon rim of its shaft's end, each
+    /// rim corner in turn landing so and the overlap recovery lifting it out
+    /// again, gained energy and wobbled for 50 s (docs/stability.md,
+    /// fragile 6).
+    ///
+    /// Each point's two body points (A's and B's, at the point at `t`) are
+    /// taken back to `since` with their bodies; their gap then, along the
+    /// normal turned back with the feature it belongs to (`NormalTurn`), is
+    /// the gap at `t` plus n·(x_A − x_B) at `since` (to the overlap times
+    /// the turn, 1e-8 m at most).
+    fn sinking(
+        &self,
+        (a, b): (usize, usize),
+        r: &PairResult,
+        t: f64,
+        seg: &[Segment],
+        since: Option<Since>,
+    ) -> f64 {
+        let deepest = r
+            .contacts
+            .iter()
+            .map(|c| -c.separation)
+            .fold(r.depth, f64::max);
+        let Some(Since {
+            time: t0,
+            deepest: carried,
+        }) = since
+        else {
+            return deepest;
+        };
+        if r.contacts.is_empty() {
+            return deepest - carried;
+        }
+        let at = |i: usize, t: f64| self.integrate_segment(i, &seg[i], t - seg[i].time);
+        let (sa, sb, sa0, sb0) = (at(a, t), at(b, t), at(a, t0), at(b, t0));
+        let back_a = sa0.orientation * sa.orientation.inverse();
+        let back_b = sb0.orientation * sb.orientation.inverse();
+        r.contacts
+            .iter()
+            .map(|c| {
+                let xa0 = sa0.position + back_a * (c.point - sa.position);
+                let xb0 = sb0.position + back_b * (c.point - sb.position);
+                let n0 = match c.turns {
+                    NormalTurn::WithA => back_a * c.normal,
+                    NormalTurn::WithB => back_b * c.normal,
+                    NormalTurn::Edges(ea, eb) => {
+                        let m = (back_a * ea).cross(&(back_b * eb));
+                        let m = m / m.norm();
+                        if m.dot(&c.normal) >= 0.0 { m } else { -m }
+                    }
+                };
+                let gap0 = c.separation + n0.dot(&(xa0 - xb0));
+                -c.separation - (-gap0).clamp(0.0, carried)
+            })
+            .fold(r.depth - carried, f64::max)
     }
 
     /// For pairs that move by more than their thickness during the step,
@@ -891,7 +970,7 @@ impl World {
         seg: &[Segment],
         start: f64,
         h: f64,
-        carried: f64,
+        since: Option<Since>,
     ) -> Option<(f64, f64)> {
         // Each body at both ends of the interval: its travel, its swing and
         // the approach-speed bound all come from these four states.
@@ -930,7 +1009,7 @@ impl World {
         let mut t = (start + spacing).min(h);
         loop {
             let (r, task) = self.query_task_at(a, b, seg, t);
-            if overlaps_more(&r, carried) {
+            if self.overlaps_more((a, b), &r, t, seg, since) {
                 return Some((prev, t));
             }
             if t >= h {
@@ -1016,8 +1095,8 @@ impl World {
     }
 
     /// Bisection for the touching instant (SPEC 2.6, fig. 3.16): `lo` is known
-    /// apart (or no deeper than the overlap `carried` into the segment), `hi`
-    /// overlapping deeper. Halves until the interval is what the pair's
+    /// apart (or with no contact point deeper than when the pair was last
+    /// solved, `since`), `hi` overlapping deeper. Halves until the interval is what the pair's
     /// relative speed covers in a 0.1 µm gap (`TOI_GAP`), or a separated `lo`
     /// is within that gap. At 4.4 m/s (a 1 m drop) that is 23 ns: impact times
     /// stay well within 1e-6 s over many bounces, for about
@@ -1030,8 +1109,8 @@ impl World {
     /// answer is then an instant where the pair is apart by at most
     /// `TOI_GAP`. That pass makes no progress when the pair, just solved at
     /// `lo`, still closes: then, as for a pair overlapping at `lo`, the
-    /// depth of the contact points decides, and the pair may sink up to
-    /// `TOI_GAP` deeper than it carried in before the impact is placed.
+    /// depth of the contact points decides, and a point may sink up to
+    /// `TOI_GAP` deeper than it was at `since` before the impact is placed.
     fn bisect(
         &mut self,
         a: usize,
@@ -1039,7 +1118,7 @@ impl World {
         seg: &[Segment],
         lo: f64,
         hi: f64,
-        carried: f64,
+        since: Option<Since>,
     ) -> f64 {
         // Forces are constant over a segment, so speeds peak at its ends.
         let speed = self
@@ -1053,7 +1132,7 @@ impl World {
                 return tau;
             }
         }
-        self.bisect_depth(a, b, seg, lo, hi, carried, resolution)
+        self.bisect_depth(a, b, seg, lo, hi, since, resolution)
     }
 
     /// Bisection on "does V-Clip find an overlap"; `lo` is apart.
@@ -1081,7 +1160,8 @@ impl World {
         lo
     }
 
-    /// Bisection on "are the contact points deeper than `carried + TOI_GAP`".
+    /// Bisection on "has a contact point sunk more than `TOI_GAP` deeper than
+    /// it was at `since`" (`sinking`).
     #[allow(clippy::too_many_arguments)]
     fn bisect_depth(
         &mut self,
@@ -1090,7 +1170,7 @@ impl World {
         seg: &[Segment],
         mut lo: f64,
         mut hi: f64,
-        carried: f64,
+        since: Option<Since>,
         resolution: f64,
     ) -> f64 {
         for _ in 0..64 {
@@ -1099,7 +1179,9 @@ impl World {
             }
             let mid = 0.5 * (lo + hi);
             let r = self.query_at(a, b, seg, mid);
-            if overlaps_more(&r, carried) || (r.penetrating && r.depth > carried + TOI_GAP) {
+            if self.overlaps_more((a, b), &r, mid, seg, since)
+                || (r.penetrating && self.sinking((a, b), &r, mid, seg, since) > TOI_GAP)
+            {
                 hi = mid;
             } else {
                 lo = mid;
@@ -1121,20 +1203,20 @@ impl World {
         group_pairs: &[(u32, u32)],
         at_tau: &[PairResult],
         seg: &[Segment],
-        carried: &HashMap<(u32, u32), f64>,
+        since: &SolvedSince,
     ) -> Option<((u32, u32), f64)> {
         let mut best: Option<((u32, u32), f64)> = None;
         for (&k, r) in group_pairs.iter().zip(at_tau) {
-            let carried = carried.get(&k).copied().unwrap_or(0.0);
-            if k == chosen || !overlaps_more(r, carried) {
+            let (a, b) = (k.0 as usize, k.1 as usize);
+            let since = since.get(&k).copied();
+            if k == chosen || !self.overlaps_more((a, b), r, tau, seg, since) {
                 continue;
             }
-            let (a, b) = (k.0 as usize, k.1 as usize);
             let start = seg[a].time.max(seg[b].time);
             if start >= tau {
                 continue;
             }
-            let t = self.bisect(a, b, seg, start, tau, carried);
+            let t = self.bisect(a, b, seg, start, tau, since);
             if t < tau && best.is_none_or(|(bk, bt)| t < bt || (t == bt && k < bk)) {
                 best = Some((k, t));
             }

@@ -810,6 +810,58 @@ fn box_pushed_into_a_corner_stays_there() {
     }
 }
 
+/// A bolt standing on the end of its shaft and wobbling on the end's
+/// 40-gon rim, each rim corner landing in turn: body 140 of the 1000-body
+/// floor pour at b405307, at 8 s, alone on the floor with its speed ×1.3.
+/// Until session 7 a corner landing on a pair already overlapping was let
+/// sink as deep as the pair's deepest point before its impact was placed,
+/// and the overlap recovery then lifted it out again, a pump: at be8ea3e
+/// this bolt still wobbled at 20 s, its energy climbing 1.03e-4 J back over
+/// its lowest so far (1.14e-5 J in one step). Now each corner's impact is
+/// placed where that corner lands: it rests at 2.84 s, climbing 3.9e-8 J.
+#[test]
+fn bolt_wobbling_on_its_rim_rests_without_pumping() {
+    let (v, w) = (
+        Vector3::new(-0.012_827_352, -0.031_279_977, 0.001_842_674) * 1.3,
+        Vector3::new(0.932_761_376, -0.385_771_082, -0.099_210_942) * 1.3,
+    );
+    let scene = format!(
+        "[world]\ndt = 0.01\nduration = 20.0\n{}\
+         [objects.bolt]\nshape = {{ bolt = {{ head_across_flats = 0.03, head_height = 0.012, \
+         shaft_radius = 0.009, shaft_length = 0.04, sides = 40 }} }}\n\
+         density = 7850.0\nrestitution = 0.8\nfriction = 0.5\n{}",
+        floor(0.8, 0.5),
+        body(
+            "bolt",
+            // The bolt's origin, placing its centre of mass at (0, 0, 0.0327056).
+            [-0.000_201_299_411, 0.000_053_584_668, 0.040_225_552],
+            &format!(
+                "orientation = [0.864928125, 0.003632694, -0.013361403, -0.501704709]\n\
+                 velocity = [{}, {}, {}]\nangular_velocity = [{}, {}, {}]",
+                v.x, v.y, v.z, w.x, w.y, w.z
+            )
+        )
+    );
+    let mut world = world(&scene);
+    let mut exec = Inline::default();
+    let mut watch = Watch::new(&world);
+    let (mut lowest_energy, mut climb) = (world.energy(), 0.0f64);
+    while !world.at_rest() && world.time() < 20.0 {
+        watch.step(&mut world, &mut exec);
+        lowest_energy = lowest_energy.min(world.energy());
+        climb = climb.max(world.energy() - lowest_energy);
+    }
+    eprintln!(
+        "rest at {:.2} s, climb {climb:.2e} J, one-step rise {:.2e} J",
+        world.time(),
+        watch.rise
+    );
+    assert!(world.at_rest(), "still wobbling at {} s", world.time());
+    assert!(world.time() <= 5.0, "rested only at {} s", world.time());
+    assert!(climb <= 1e-6, "energy climbed {climb:e} J over its lowest");
+    assert_penetration(&world, CONTACT_TOLERANCE, "bolt on its rim");
+}
+
 // ------------------------------------------------------------------ long runs
 
 /// The OSRF box (0.1 × 0.4 × 0.9 m, 10 kg, ω0 = (0.1, 5, 0.1)) tumbling free
