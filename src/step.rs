@@ -1179,8 +1179,10 @@ impl World {
             }
             let mid = 0.5 * (lo + hi);
             let r = self.query_at(a, b, seg, mid);
-            if self.overlaps_more((a, b), &r, mid, seg, since)
-                || (r.penetrating && self.sinking((a, b), &r, mid, seg, since) > TOI_GAP)
+            // `overlaps_more`, or a point sunk past `TOI_GAP` within the
+            // tolerance: together, one `sinking` call.
+            if r.penetrating
+                && (r.contacts.is_empty() || self.sinking((a, b), &r, mid, seg, since) > TOI_GAP)
             {
                 hi = mid;
             } else {
