@@ -1463,8 +1463,7 @@ fn pentagonal_prism_does_not_gain_86_kj_at_0_13_s() {
 /// At a986e02 the box sank 7.5 µm in the 8 ms after the pair was solved
 /// (t = 0.69 s), then each impact of the next steps found it 0.1 µm deeper
 /// than the last (`TOI_GAP`): 10.26 µm. Solving the island again once a
-/// body has turned by `SPIN_TRUST`, and the resting solve taking overlap
-/// past 9 µm out within its interval, keep it within the tolerance.
+/// body has turned by `SPIN_TRUST` keeps it within the tolerance (9.74 µm).
 #[test]
 fn light_box_on_a_tipping_hull_stays_within_the_tolerance() {
     let (w, _, _) = replay("stress_tipping_hull_ratchet");
@@ -1491,8 +1490,7 @@ fn prism_spinning_on_a_corner_gains_nothing_from_its_resting_force() {
 /// Random sweep seed 2, scene 79: eleven bodies. At a986e02 a pair's
 /// overlap went past 10 µm from t = 1.19 s by the same ratchet as scene 8
 /// of seed 1, and three impacts that made no progress were accepted:
-/// 0.207 mm. Each of the two changes alone (`SPIN_TRUST`, the resting
-/// solve's firm overlap) keeps it at 9.97 µm with nothing accepted.
+/// 0.207 mm. `SPIN_TRUST` keeps it at 9.97 µm with nothing accepted.
 #[test]
 fn seed_two_scene_79_accepts_no_overlap() {
     let (w, _, _) = replay("stress_accepted_overlap_seed2");

@@ -31,7 +31,6 @@
 use super::{lcp, subspace};
 use crate::body::BodyId;
 use crate::collision::manifold::NormalTurn;
-use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -87,17 +86,6 @@ const OVERLAP_SLOP: f64 = 1e-6;
 /// only mends what a failed solve or an accepted overlap left behind, at a
 /// separating speed of 0.2·depth/dt (2e-4 m/s for 10 µm at dt = 0.01 s).
 const OVERLAP_RECOVERY: f64 = 0.2;
-
-/// Overlap (metres) past which the resting solve aims to take the whole
-/// excess out within its interval h: from rest, a constant force opens the
-/// gap by h·v'/2, so v' = 2·excess/h brings the point back here by the end,
-/// as predicted. Time of impact places an impact where a contact point has
-/// sunk 0.1 µm (`TOI_GAP`) deeper than when its pair was last solved, so a
-/// pair the resting prediction lets drift in gains 0.1 µm per event, and the
-/// recovery above (0.2·depth/dt) did not win against it within the 10 µm
-/// contact tolerance: 2 of 300 random scenes (seed 1) and 5 of 300 (seed 2)
-/// ended up to 0.26 µm past it.
-const OVERLAP_FIRM: f64 = 0.9 * CONTACT_TOLERANCE;
 
 /// Contact request for one system (SPEC 3.4).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -490,7 +478,6 @@ fn solve_phase(
                 let separating = if u > SEPARATING_EPS { u } else { 0.0 };
                 vn + separating + curvature[ci] * task.dt
                     - OVERLAP_RECOVERY * (-c.separation - OVERLAP_SLOP).max(0.0) / task.dt
-                    - 2.0 * (-c.separation - OVERLAP_FIRM).max(0.0) / task.dt
             }
         };
         bias.push(match phase {
