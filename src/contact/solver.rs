@@ -31,6 +31,7 @@
 use super::{lcp, subspace};
 use crate::body::BodyId;
 use crate::collision::manifold::NormalTurn;
+use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -86,6 +87,15 @@ const OVERLAP_SLOP: f64 = 1e-6;
 /// only mends what a failed solve or an accepted overlap left behind, at a
 /// separating speed of 0.2·depth/dt (2e-4 m/s for 10 µm at dt = 0.01 s).
 const OVERLAP_RECOVERY: f64 = 0.2;
+
+/// Overlap (metres) past which the resting solve asks the excess to be gone
+/// by the end of its interval (target 2·excess/h: from rest, a constant
+/// force opens the gap by h·v'/2). Each impact lets a pair 0.1 µm deeper
+/// than it was last solved (`TOI_GAP`), and past the 10 µm tolerance the
+/// recovery above lost that race (random scenes ended at up to 10.3 µm).
+/// Not lower: from 9 µm (e77ea07) the lift fed a bolt wobbling on its rim,
+/// and the 1000-body floor pour never rested (docs/stability.md).
+const OVERLAP_FIRM: f64 = 0.99 * CONTACT_TOLERANCE;
 
 /// Contact request for one system (SPEC 3.4).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -478,6 +488,7 @@ fn solve_phase(
                 let separating = if u > SEPARATING_EPS { u } else { 0.0 };
                 vn + separating + curvature[ci] * task.dt
                     - OVERLAP_RECOVERY * (-c.separation - OVERLAP_SLOP).max(0.0) / task.dt
+                    - 2.0 * (-c.separation - OVERLAP_FIRM).max(0.0) / task.dt
             }
         };
         bias.push(match phase {
