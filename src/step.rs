@@ -117,6 +117,11 @@ impl SpinResolves {
         }
     }
 
+    /// Drops what was due for body `i` (its island is being solved now).
+    fn take(&mut self, i: usize) {
+        self.0.retain(|&(_, j)| j != i);
+    }
+
     /// The earliest due, if any: (time, body).
     fn next(&self) -> Option<(f64, usize)> {
         self.0
@@ -535,7 +540,7 @@ impl World {
                 break;
             };
             if spin_resolve {
-                spin_resolves.0.retain(|&(_, i)| i as u32 != pair.0);
+                spin_resolves.take(pair.0 as usize);
             } else if events >= budget {
                 // Out of events: keep the small overlap rather than stall the step.
                 accepted.push(pair);
@@ -768,11 +773,8 @@ impl World {
             return HashMap::new();
         }
         let velocity_at = |i: usize, p: &Vector3<f64>| {
-            let body = Body {
-                state: seg[i].state,
-                ..self.bodies[i].clone()
-            };
-            body.point_velocity(self.object(i), p)
+            self.body_at(i, seg[i].state)
+                .point_velocity(self.object(i), p)
         };
         touching
             .iter()
@@ -997,20 +999,16 @@ impl World {
         seg: &[Segment],
         since: Option<Since>,
     ) -> f64 {
-        let deepest = r
-            .contacts
-            .iter()
-            .map(|c| -c.separation)
-            .fold(r.depth, f64::max);
+        // `r.depth` is already the deepest of the contact points.
         let Some(Since {
             time: t0,
             deepest: carried,
         }) = since
         else {
-            return deepest;
+            return r.depth;
         };
         if r.contacts.is_empty() {
-            return deepest - carried;
+            return r.depth - carried;
         }
         let at = |i: usize, t: f64| self.integrate_segment(i, &seg[i], t - seg[i].time);
         let (sa, sb, sa0, sb0) = (at(a, t), at(b, t), at(a, t0), at(b, t0));
@@ -1309,19 +1307,23 @@ impl World {
         best
     }
 
+    /// Body `i` as it is in `state` (a segment's, or one integrated along it).
+    fn body_at(&self, i: usize, state: BodyState) -> Body {
+        Body {
+            state,
+            ..self.bodies[i].clone()
+        }
+    }
+
     /// Upper bound of how fast any point of `a` approaches any point of `b`
     /// at time `t` (linear plus angular speed times outer radius).
     fn relative_speed_bound(&self, a: usize, b: usize, seg: &[Segment], t: f64) -> f64 {
         let bound = |i: usize| {
             let s = self.integrate_segment(i, &seg[i], t - seg[i].time);
-            let body = Body {
-                state: s,
-                ..self.bodies[i].clone()
-            };
             let o = self.object(i);
             (
                 s.velocity,
-                body.angular_velocity(o).norm() * o.outer_radius(),
+                self.body_at(i, s).angular_velocity(o).norm() * o.outer_radius(),
             )
         };
         let (va, wa) = bound(a);
@@ -1515,10 +1517,7 @@ impl World {
                     let s = &seg[i];
                     let dynamic =
                         b.is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok();
-                    let body = Body {
-                        state: s.state,
-                        ..b.clone()
-                    };
+                    let body = self.body_at(i, s.state);
                     let inv_inertia = if dynamic {
                         body.inv_inertia_world(o)
                     } else {
@@ -1613,11 +1612,10 @@ impl World {
                     .map(|b| b.index())
                     .filter(|i| members.binary_search(i).is_ok())
                     .map(|i| {
-                        let body = Body {
-                            state: seg[i].state,
-                            ..self.bodies[i].clone()
-                        };
-                        (i, body.angular_velocity(self.object(i)).norm())
+                        let spin = self
+                            .body_at(i, seg[i].state)
+                            .angular_velocity(self.object(i));
+                        (i, spin.norm())
                     })
                     .max_by(|x, y| x.1.total_cmp(&y.1).then(y.0.cmp(&x.0)))
             })
