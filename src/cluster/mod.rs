@@ -60,7 +60,7 @@ impl Roles {
 }
 
 /// Test aid: `--slow-rank R=F` makes rank R take F times longer per batch
-/// (it sleeps (F − 1)× its compute time), like a PC another user is loading.
+/// (it spins for (F − 1)× its work's CPU time), like a PC another user is loading.
 pub fn slow_factor(slow: &[(i32, f64)], rank: i32) -> f64 {
     slow.iter()
         .filter(|(r, _)| *r == rank)
@@ -68,20 +68,39 @@ pub fn slow_factor(slow: &[(i32, f64)], rank: i32) -> f64 {
         .fold(1.0, f64::max)
 }
 
-/// Keeps the CPU busy for (factor − 1)× the measured work, as a slower PC
-/// would. A sleep would not do: its granularity (tens of µs) dwarfs the
-/// microsecond batches of small scenes and would fake a much slower rank.
-fn stall(factor: f64, busy: Duration) -> Duration {
+/// CPU time this thread has used. A slowed rank's extra work is counted in
+/// it, not on the wall clock: on a loaded machine a batch's wall time
+/// includes time the rank sat preempted, and stalling (factor − 1)× that
+/// multiplied every preemption spike (a rank set 3× slower measured 21×
+/// slower while another job used the second core).
+fn thread_cpu_time() -> Duration {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_THREAD_CPUTIME_ID
+    // is supported on every Linux the cluster runs on.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return Duration::ZERO;
+    }
+    Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32)
+}
+
+/// Keeps the CPU busy for (factor − 1)× the CPU time the batch's work took
+/// (`cpu_at_start` was read when it began), as a slower PC would, and
+/// returns the batch's wall time `since` it began. A sleep would not do: its
+/// granularity (tens of µs) dwarfs the microsecond batches of small scenes
+/// and would fake a much slower rank.
+fn stall(factor: f64, since: Instant, cpu_at_start: Duration) -> Duration {
     if factor > 1.0 {
-        let extra = busy.mul_f64(factor - 1.0);
-        let until = Instant::now() + extra;
-        while Instant::now() < until {
+        let work = thread_cpu_time().saturating_sub(cpu_at_start);
+        let until = thread_cpu_time() + work.mul_f64(factor - 1.0);
+        while thread_cpu_time() < until {
             std::hint::spin_loop();
         }
-        busy + extra
-    } else {
-        busy
     }
+    since.elapsed()
 }
 
 /// Smoothed moments of (cost given, busy time reported) per batch, for a
@@ -564,6 +583,11 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
             }
         };
         let clock = Instant::now();
+        let cpu = if slow > 1.0 {
+            thread_cpu_time()
+        } else {
+            Duration::ZERO
+        };
         let reply = match req {
             Req::Ping => Reply::Pong,
             Req::Stop => Reply::Report(report.clone()),
@@ -573,7 +597,7 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
                     .iter()
                     .map(|t| narrowphase::query_pair(&scene.objects, t))
                     .collect();
-                let busy = stall(slow, clock.elapsed()).as_secs_f64();
+                let busy = stall(slow, clock, cpu).as_secs_f64();
                 report.busy_s += busy;
                 Reply::Narrowphase {
                     results,
@@ -583,7 +607,7 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
             Req::SolveIslands { tasks } => {
                 report.island_tasks += tasks.len() as u64;
                 let results = tasks.iter().map(solver::solve_island).collect();
-                let busy = stall(slow, clock.elapsed()).as_secs_f64();
+                let busy = stall(slow, clock, cpu).as_secs_f64();
                 report.busy_s += busy;
                 Reply::SolveIslands {
                     results,
