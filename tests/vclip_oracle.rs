@@ -11,6 +11,7 @@ use rigidsim::collision::manifold::{ContactPoint, contact_points};
 use rigidsim::collision::polyhedron::{ConvexPolyhedron, PolyhedronError, weld};
 use rigidsim::collision::vclip::{
     Feature, FeaturePair, Proximity, closest_features, closest_features_with_limit, exhaustive,
+    separating_axis,
 };
 
 // ---------------------------------------------------------------- shapes
@@ -1342,4 +1343,129 @@ fn crossed_edges_give_one_point_and_parallel_edges_two() {
         &pose(v(0.0, 0.0, 0.0), about_x),
     );
     assert_points(&got, &[v(-0.1, 0.0, h), v(0.5, 0.0, h)], Vector3::z(), 0.0);
+}
+
+/// Random sweep seed 5, scene 74, t = 1.3164 s: a box (A) and a hull (B)
+/// both resting on the floor, the box's bottom edge nearly crossing the
+/// hull's, world coordinates. They overlap by 0.750 µm (the hull of A − B,
+/// checked with qhull; parry agrees below); V-Clip, warm-started from the
+/// previous step's features, ended on features 1.7e-12 m apart and called
+/// them apart, so the contact missed the overlap and the pair sank 11.8 µm
+/// (docs/stability.md, fragile 1). From any starting feature pair V-Clip
+/// must now find the overlap, and the separating-axis test must choose the
+/// 0.750 µm axis across the edges over the hull's face 15° away (0.776 µm).
+#[test]
+fn box_and_hull_meeting_on_a_floor_overlap_from_every_warm_start() {
+    let a = ConvexPolyhedron::hull(&[
+        v(
+            -0.32813916823655875,
+            0.15365449689689556,
+            1.5067541424704234e-05,
+        ),
+        v(
+            -0.32812590993600255,
+            0.15366591978992614,
+            0.09600799734961686,
+        ),
+        v(-0.414694539877879, 0.2808471643602855, 0.09600481977353584),
+        v(
+            -0.4147077981784353,
+            0.280835741467255,
+            1.188996534368103e-05,
+        ),
+        v(
+            -0.27392241228067205,
+            0.1905606876323989,
+            0.09599612052439813,
+        ),
+        v(
+            -0.2739356705812283,
+            0.1905492647393683,
+            3.190716205969668e-06,
+        ),
+        v(
+            -0.3605043005231048,
+            0.3177305093097277,
+            1.314012494646466e-08,
+        ),
+        v(-0.3604910422225486, 0.31774193220275826, 0.0959929429483171),
+    ])
+    .unwrap();
+    let b = ConvexPolyhedron::hull(&[
+        v(
+            -0.27113495281713196,
+            0.1864607260530993,
+            -6.073900811962019e-07,
+        ),
+        v(
+            -0.3855114283550007,
+            0.3544604165025387,
+            4.4163948254710705e-07,
+        ),
+        v(
+            -0.25038483211919477,
+            0.3824990178393239,
+            1.753194203395203e-05,
+        ),
+        v(
+            -0.36926174727440986,
+            0.36926565879715867,
+            0.08199690535577514,
+        ),
+        v(-0.21830930929510906, 0.2215319258947248, 0.0809220332755189),
+        v(
+            -0.21630964345170894,
+            0.31980375423315743,
+            0.0944202468294979,
+        ),
+        v(
+            -0.18407216251512856,
+            0.3014179364429333,
+            0.007212020307909885,
+        ),
+        v(-0.24239614799086104, 0.4121348476630294, 0.0925099982903905),
+        v(
+            -0.25645741540888833,
+            0.4006284922912962,
+            0.011435161911195861,
+        ),
+        v(
+            -0.29313592064282035,
+            0.27964621215420177,
+            0.07126599977349551,
+        ),
+        v(
+            -0.20209808185855943,
+            0.38647492936170047,
+            0.05025797209352773,
+        ),
+    ])
+    .unwrap();
+    let id = Isometry3::identity();
+    let (_, signed) = Oracle::new(&a, &b).query(&id, &id);
+    assert!(signed < -7e-7, "parry: {signed:e}");
+    let sat = separating_axis(&a, &id, &b, &id);
+    assert!(
+        (sat.separation + 7.5e-7).abs() < 1e-9,
+        "separating axis {:e} along {:?}",
+        sat.separation,
+        sat.normal
+    );
+    let features = |p: &ConvexPolyhedron| {
+        (0..p.vertex_count() as u32)
+            .map(Feature::Vertex)
+            .chain((0..p.edge_count() as u32).map(Feature::Edge))
+            .chain((0..p.face_count() as u32).map(Feature::Face))
+            .collect::<Vec<_>>()
+    };
+    let mut starts = 0;
+    for &fa in &features(&a) {
+        for &fb in &features(&b) {
+            let warm = FeaturePair { a: fa, b: fb };
+            let r = closest_features(&a, &id, &b, &id, Some(warm));
+            assert!(r.penetrating, "warm start {warm:?}: {r:?}");
+            starts += 1;
+        }
+    }
+    assert_eq!(starts, features(&a).len() * features(&b).len());
 }

@@ -40,6 +40,7 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::manifold::FACE_CONTACT_ANGLE;
 use super::polyhedron::{ConvexPolyhedron, VoronoiPlane};
 
 /// A vertex, edge or face of one polyhedron, by index into its tables.
@@ -176,10 +177,11 @@ pub fn closest_features_with_limit(
     };
     // Features that meet (distance 0) say nothing about the interiors: two
     // cubes meeting corner to corner and two identical cubes at one pose
-    // both end on coincident vertices. The separating-axis test decides.
+    // both end on coincident vertices. The separating-axis test decides, up
+    // to `VCLIP_CHECKED_REL` of the size apart.
     let size = a.scale().min(b.scale());
     if !found.penetrating
-        && found.distance <= TOUCHING_REL_TOL * size
+        && found.distance <= VCLIP_CHECKED_REL * size
         && let Some(deep) = sat_penetration(a, pose_a, b, pose_b, -TOUCHING_REL_TOL * size)
     {
         return Proximity { iterations, ..deep };
@@ -191,6 +193,17 @@ pub fn closest_features_with_limit(
 /// are rounding-level: such a pair touches, and is called penetrating only
 /// if the separating-axis test finds an overlap deeper than this.
 pub const TOUCHING_REL_TOL: f64 = 1e-12;
+
+/// A V-Clip answer "apart" by at most this fraction of the smaller
+/// polyhedron's size is checked by the separating-axis test. Features that
+/// nearly meet pass V-Clip's Voronoi tests whatever the interiors do: a box
+/// and a hull both resting on a floor, the box's bottom edge nearly
+/// crossing the hull's, ended apart by 1.7e-12 m while they overlapped by
+/// 0.75 µm (exact, from the hull of A − B); the contact missed the deep
+/// side, which sank 11.8 µm before the step's end, and its impact, placed
+/// at that same instant again, was accepted (docs/stability.md, fragile 1).
+/// At this distance an impact's bisection ends anyway (`TOI_GAP`, 0.1 µm).
+pub const VCLIP_CHECKED_REL: f64 = 1e-6;
 
 /// One polyhedron of the pair, with the map from the other's local frame
 /// into its own.
@@ -856,11 +869,18 @@ pub struct SeparatingAxis {
     /// distance); when positive a lower bound on the distance.
     pub separation: f64,
     pub kind: AxisKind,
+    /// The largest separation over every axis tested, before face axes are
+    /// preferred (`EDGE_AXIS_REL_BIAS`): the pair is apart exactly when it
+    /// is positive. `separation` may be negative by up to the bias while an
+    /// edge axis separates the pair.
+    pub largest: f64,
 }
 
-/// An edge axis must beat the best face axis by this fraction of the smaller
-/// polyhedron's size to be chosen: at equal overlap, face axes give stable
-/// face contacts, and parallel edge pairs only reproduce face normals.
+/// An edge axis within `FACE_CONTACT_ANGLE` of the best face axis must beat
+/// it by this fraction of the smaller polyhedron's size to be chosen: at
+/// equal overlap, face axes give stable face contacts, and nearly parallel
+/// edge pairs only reproduce face normals. Edge axes in other directions
+/// need only beat it (since session 9).
 pub const EDGE_AXIS_REL_BIAS: f64 = 1e-6;
 
 /// Separating-axis test over the face normals of both polyhedra and the
@@ -941,7 +961,18 @@ pub fn separating_axis(
             }
         }
     }
-    let bias = EDGE_AXIS_REL_BIAS * a.scale().min(b.scale());
+    // The bias is for edge axes that reproduce the face's normal (parallel
+    // edges on a face); an edge axis in another direction is a different
+    // contact, and the smaller overlap wins: a box's corner edge against a
+    // hull's bottom edge, both on a floor, overlapped 0.750 µm across the
+    // edges and 0.776 µm along the hull's face 15° away, whose contact
+    // points missed the overlap (docs/stability.md, fragile 1).
+    let reproduces_face = best_edge.1.dot(&best_face.1) >= FACE_CONTACT_ANGLE.cos();
+    let bias = if reproduces_face {
+        EDGE_AXIS_REL_BIAS * a.scale().min(b.scale())
+    } else {
+        0.0
+    };
     let (separation, n, kind) = if best_edge.0 > best_face.0 + bias {
         best_edge
     } else {
@@ -951,6 +982,7 @@ pub fn separating_axis(
         normal: pose_a.rotation * n,
         separation,
         kind,
+        largest: best_edge.0.max(best_face.0),
     }
 }
 
@@ -1088,7 +1120,7 @@ fn sat_penetration(
     below: f64,
 ) -> Option<Proximity> {
     let sat = separating_axis(a, pose_a, b, pose_b);
-    if sat.separation >= below {
+    if sat.largest >= below {
         return None;
     }
     let b_to_a = pose_a.inv_mul(pose_b);
