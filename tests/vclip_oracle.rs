@@ -1469,3 +1469,136 @@ fn box_and_hull_meeting_on_a_floor_overlap_from_every_warm_start() {
     }
     assert_eq!(starts, features(&a).len() * features(&b).len());
 }
+
+/// Random sweep seed 4, scene 113 (with impacts of touching pairs bisected
+/// on depth alone): two hulls, world coordinates, overlapping by 0.339 mm
+/// across two edges (the hull of A − B, checked with qhull). The axis is
+/// the edges' and reproduces a face normal, so each body offered the face
+/// along it, and the faces' clipped points were 13.7 µm apart: the overlap
+/// went unseen until it jumped into view 0.48 mm deep. The contact points
+/// must hold the overlap along their normal.
+#[test]
+fn contact_points_hold_an_overlap_of_edges_crossing_beside_faces() {
+    let a = ConvexPolyhedron::hull(&[
+        v(
+            -0.41691499428379175,
+            -0.5101429945578411,
+            0.08599531882416885,
+        ),
+        v(
+            -0.5034331547789995,
+            -0.41372067798018697,
+            0.08599503498870575,
+        ),
+        v(
+            -0.5998554713164481,
+            -0.5002388384274996,
+            0.08599905015793771,
+        ),
+        v(
+            -0.5133373108212403,
+            -0.5966611550051537,
+            0.08599933399340082,
+        ),
+        v(
+            -0.513339168697471,
+            -0.5966630751776243,
+            7.810360583684894e-06,
+        ),
+        v(
+            -0.5998573291926788,
+            -0.5002407585999702,
+            7.526525120593597e-06,
+        ),
+        v(
+            -0.5034350126552302,
+            -0.41372259815265755,
+            3.5113558886218366e-06,
+        ),
+        v(
+            -0.41691685216002244,
+            -0.5101449147303116,
+            3.795191351727012e-06,
+        ),
+    ])
+    .unwrap();
+    let b = ConvexPolyhedron::hull(&[
+        v(
+            -0.41079928709192054,
+            -0.4913716642672826,
+            0.1610961861018448,
+        ),
+        v(-0.31426485101292, -0.4453487775214944, 0.23087982767869622),
+        v(
+            -0.4149249892459643,
+            -0.3715889240168219,
+            0.19240249463533332,
+        ),
+        v(
+            -0.49504308770902516,
+            -0.41795242212719774,
+            0.08272587159409578,
+        ),
+        v(
+            -0.35341555117886503,
+            -0.440549416762456,
+            0.06440323916110777,
+        ),
+        v(-0.363402266683142, -0.5347845848543387, 0.06219273065875497),
+        v(
+            -0.37323333726846397,
+            -0.3278605468416258,
+            0.19674545372062163,
+        ),
+        v(
+            -0.41746852457873135,
+            -0.3726010228001577,
+            0.07821824169409448,
+        ),
+        v(
+            -0.4961249312275375,
+            -0.46775360592045573,
+            0.11612750074762926,
+        ),
+        v(
+            -0.45329868595086736,
+            -0.4903013788855213,
+            0.09931602784355886,
+        ),
+        v(
+            -0.33665278274349025,
+            -0.5192321317379919,
+            0.16632024464551198,
+        ),
+        v(
+            -0.3367526544630215,
+            -0.39354006933511765,
+            0.15618059390076092,
+        ),
+        v(
+            -0.27179530389084017,
+            -0.4747705007735852,
+            0.17341225961906592,
+        ),
+        v(
+            -0.2915026484330552,
+            -0.5109443012942426,
+            0.08102477146472215,
+        ),
+    ])
+    .unwrap();
+    let id = Isometry3::identity();
+    let (_, signed) = Oracle::new(&a, &b).query(&id, &id);
+    assert!(signed < -3e-4, "parry: {signed:e}");
+    let prox = closest_features(&a, &id, &b, &id, None);
+    assert!(prox.penetrating, "{prox:?}");
+    let points: Vec<ContactPoint> = contact_points(&a, &id, &b, &id, &prox, 1e-5);
+    let depth = points
+        .iter()
+        .map(|c| -c.separation)
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        (depth - 3.392487e-4).abs() < 1e-9,
+        "deepest contact point {depth:e} m, the overlap is 3.392487e-4 m: {points:?}"
+    );
+}

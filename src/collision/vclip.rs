@@ -874,6 +874,9 @@ pub struct SeparatingAxis {
     /// is positive. `separation` may be negative by up to the bias while an
     /// edge axis separates the pair.
     pub largest: f64,
+    /// The best edge axis's pair (edge of A, edge of B) and separation,
+    /// whether chosen or not; `None` when no edge pair spans one.
+    pub best_edges: Option<(u32, u32, f64)>,
 }
 
 /// An edge axis within `FACE_CONTACT_ANGLE` of the best face axis must beat
@@ -983,6 +986,10 @@ pub fn separating_axis(
         separation,
         kind,
         largest: best_edge.0.max(best_face.0),
+        best_edges: match best_edge {
+            (sep, _, AxisKind::Edges(i, j)) if sep > f64::NEG_INFINITY => Some((i, j, sep)),
+            _ => None,
+        },
     }
 }
 
