@@ -202,6 +202,7 @@ fn allowed_depth(carried: f64) -> f64 {
     let ceiling = CONTACT_TOLERANCE - RATCHET_GAP;
     carried + (ceiling - carried).clamp(RATCHET_GAP, TOI_GAP)
 }
+
 /// Impact events a step may take before it accepts the overlaps left: at
 /// least `MIN_EVENTS_PER_STEP`, and `EVENTS_PER_MOVING_BODY` for each moving
 /// body. An event re-solves one contact island, so its cost does not grow
@@ -1202,10 +1203,10 @@ impl World {
     /// 224-face spheres). The answer is then an instant where the pair is
     /// apart by at most `TOI_GAP`. That pass makes no progress when the
     /// pair, just solved at `lo`, still closes: then, as for a pair
-    /// touching or overlapping at `lo`, the
-    /// depth of the contact points decides, and a point may sink to its
-    /// `allowed_depth` (`TOI_GAP` deeper than it was at `since`, less near
-    /// the tolerance) before the impact is placed.
+    /// touching or overlapping at `lo`, the depth of the contact points
+    /// decides, and a point may sink to its `allowed_depth` (`TOI_GAP`
+    /// deeper than it was at `since`, less near the tolerance) before the
+    /// impact is placed.
     fn bisect(
         &mut self,
         a: usize,

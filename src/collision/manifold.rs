@@ -99,13 +99,13 @@ pub fn contact_points(
             && let Some((i, j, sep)) = sat.best_edges
             && sep < 0.0
         {
-            let end = |p: &ConvexPolyhedron, pose: &Isometry3<f64>, e: u32| {
+            let ends = |p: &ConvexPolyhedron, pose: &Isometry3<f64>, e: u32| {
                 let ed = p.edges()[e as usize];
                 let v = |k: u32| pose * nalgebra::Point3::from(p.vertices()[k as usize]);
                 (v(ed.tail).coords, v(ed.head).coords)
             };
-            let (p0, p1) = end(a, pose_a, i);
-            let (q0, q1) = end(b, pose_b, j);
+            let (p0, p1) = ends(a, pose_a, i);
+            let (q0, q1) = ends(b, pose_b, j);
             let (pa, pb) = closest_segment_points(&p0, &p1, &q0, &q1);
             let n = sat.normal;
             points.push(ContactPoint {
