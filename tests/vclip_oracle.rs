@@ -1451,23 +1451,9 @@ fn box_and_hull_meeting_on_a_floor_overlap_from_every_warm_start() {
         sat.separation,
         sat.normal
     );
-    let features = |p: &ConvexPolyhedron| {
-        (0..p.vertex_count() as u32)
-            .map(Feature::Vertex)
-            .chain((0..p.edge_count() as u32).map(Feature::Edge))
-            .chain((0..p.face_count() as u32).map(Feature::Face))
-            .collect::<Vec<_>>()
-    };
-    let mut starts = 0;
-    for &fa in &features(&a) {
-        for &fb in &features(&b) {
-            let warm = FeaturePair { a: fa, b: fb };
-            let r = closest_features(&a, &id, &b, &id, Some(warm));
-            assert!(r.penetrating, "warm start {warm:?}: {r:?}");
-            starts += 1;
-        }
-    }
-    assert_eq!(starts, features(&a).len() * features(&b).len());
+    let truth = exhaustive(&a, &id, &b, &id);
+    assert!(truth.penetrating, "{truth:?}");
+    assert_every_warm_start_agrees(&a, &id, &b, &id);
 }
 
 /// Random sweep seed 4, scene 113 (with impacts of touching pairs bisected

@@ -94,8 +94,8 @@ fn thread_cpu_time() -> Duration {
 /// and would fake a much slower rank.
 fn stall(factor: f64, since: Instant, cpu_at_start: Duration) -> Duration {
     if factor > 1.0 {
-        let work = thread_cpu_time().saturating_sub(cpu_at_start);
-        let until = thread_cpu_time() + work.mul_f64(factor - 1.0);
+        let now = thread_cpu_time();
+        let until = now + now.saturating_sub(cpu_at_start).mul_f64(factor - 1.0);
         while thread_cpu_time() < until {
             std::hint::spin_loop();
         }

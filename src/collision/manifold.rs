@@ -91,10 +91,7 @@ pub fn contact_points(
         // behind a point 13.7 µm apart until it jumped into view, and the
         // jump could not be bisected (random sweep seed 4, scene 113). The
         // best edge pair's closest points are then a point.
-        let deepest = points
-            .iter()
-            .map(|c| c.separation)
-            .fold(f64::INFINITY, f64::min);
+        let deepest = closest_separation(&points);
         if deepest > sat.separation + OVERLAP_HELD_REL * size
             && let Some((i, j, sep)) = sat.best_edges
             && sep < 0.0
@@ -114,10 +111,7 @@ pub fn contact_points(
                 separation: n.dot(&(pa - pb)),
                 turns: NormalTurn::Edges(p1 - p0, q1 - q0),
             });
-            let closest = points
-                .iter()
-                .map(|c| c.separation)
-                .fold(f64::INFINITY, f64::min);
+            let closest = closest_separation(&points);
             points.retain(|c| c.separation <= closest + tolerance);
         }
         return points;
@@ -214,10 +208,7 @@ fn points_along(
             turns,
         })
         .collect();
-    let closest = points
-        .iter()
-        .map(|c| c.separation)
-        .fold(f64::INFINITY, f64::min);
+    let closest = closest_separation(&points);
     let merge = DUPLICATE_REL_TOL * size;
     let mut kept: Vec<ContactPoint> = Vec::with_capacity(points.len());
     for c in points {
@@ -228,6 +219,14 @@ fn points_along(
         }
     }
     kept
+}
+
+/// The smallest separation of `points` (the deepest overlap, negated).
+fn closest_separation(points: &[ContactPoint]) -> f64 {
+    points
+        .iter()
+        .map(|c| c.separation)
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// `min_A(n·x) − max_B(n·x)`, world direction `n`.

@@ -869,14 +869,20 @@ pub struct SeparatingAxis {
     /// distance); when positive a lower bound on the distance.
     pub separation: f64,
     pub kind: AxisKind,
+    /// The best edge axis's pair (edge of A, edge of B) and separation,
+    /// whether chosen or not; `None` when no edge pair spans one.
+    pub best_edges: Option<(u32, u32, f64)>,
+}
+
+impl SeparatingAxis {
     /// The largest separation over every axis tested, before face axes are
     /// preferred (`EDGE_AXIS_REL_BIAS`): the pair is apart exactly when it
     /// is positive. `separation` may be negative by up to the bias while an
     /// edge axis separates the pair.
-    pub largest: f64,
-    /// The best edge axis's pair (edge of A, edge of B) and separation,
-    /// whether chosen or not; `None` when no edge pair spans one.
-    pub best_edges: Option<(u32, u32, f64)>,
+    pub fn largest(&self) -> f64 {
+        self.best_edges
+            .map_or(self.separation, |(_, _, edge)| edge.max(self.separation))
+    }
 }
 
 /// An edge axis within `FACE_CONTACT_ANGLE` of the best face axis must beat
@@ -985,7 +991,6 @@ pub fn separating_axis(
         normal: pose_a.rotation * n,
         separation,
         kind,
-        largest: best_edge.0.max(best_face.0),
         best_edges: match best_edge {
             (sep, _, AxisKind::Edges(i, j)) if sep > f64::NEG_INFINITY => Some((i, j, sep)),
             _ => None,
@@ -1127,7 +1132,7 @@ fn sat_penetration(
     below: f64,
 ) -> Option<Proximity> {
     let sat = separating_axis(a, pose_a, b, pose_b);
-    if sat.largest >= below {
+    if sat.largest() >= below {
         return None;
     }
     let b_to_a = pose_a.inv_mul(pose_b);
