@@ -1,26 +1,8 @@
 //! `summary.json`: what a run did, how long it took and how it ended.
 
-use crate::step::{Counters, StageSeconds};
+pub use crate::step::stats::{Distribution, RankSummary};
+use crate::step::stats::{Counters, StageSeconds};
 use serde::{Deserialize, Serialize};
-
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct RankSummary {
-    pub rank: u32,
-    /// `coordinator`, `worker` or `renderer`.
-    pub role: String,
-    pub busy_s: f64,
-    pub waiting_s: f64,
-    pub tasks: u64,
-    pub narrowphase_tasks: u64,
-    pub island_tasks: u64,
-    /// Estimated cost (seconds, by the calibrated model) of the work given.
-    pub estimated_cost_s: f64,
-    pub bytes_sent: u64,
-    pub bytes_received: u64,
-    /// Estimated relative speed (1 = as fast as the model's calibration).
-    pub speed: f64,
-    pub frames_rendered: u64,
-}
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Summary {
@@ -56,11 +38,3 @@ pub struct Summary {
     pub notes: Vec<String>,
 }
 
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct Distribution {
-    pub narrowphase_distributed: u64,
-    pub narrowphase_local: u64,
-    pub solve_distributed: u64,
-    pub solve_local: u64,
-    pub message_latency_s: f64,
-}

@@ -1,0 +1,345 @@
+//! A set of bodies stepped together, in local indices: the whole world for
+//! the stages every body takes (the contact solve at the step's start,
+//! integration, the broadphase), or one interaction group for its impact
+//! events (`group`). The stage code is written once, over a `Region`.
+//!
+//! Local index `i` is body `ids[i]` of the world; `ids` is increasing, so
+//! every tie-break on local pair keys orders pairs exactly as on world ids,
+//! and a group's result never depends on which other bodies the world holds.
+
+use super::contact::{Touching, WarmContact};
+use super::stats::{Counters, StageSeconds};
+use super::Executor;
+use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
+use crate::collision::broadphase::{self, SphereProxy};
+use crate::collision::narrowphase::{
+    self, CONTACT_TOLERANCE, CachedFeatures, PairResult, PairTask,
+};
+use crate::dynamics::integrate::integrate;
+use crate::scene::{ForceWindow, Settings};
+use nalgebra::{Isometry3, Vector3};
+use std::collections::{BTreeMap, HashMap};
+use std::time::Instant;
+
+/// What every region of one step reads and nothing changes: the scene's
+/// objects, settings and force windows, the step's start time, and the
+/// world's switches.
+pub(crate) struct StepStatic<'s> {
+    pub objects: &'s [ObjectDef],
+    pub settings: &'s Settings,
+    pub forces: &'s [ForceWindow],
+    /// Simulated time at the step's start.
+    pub t0: f64,
+    pub skip_separating: bool,
+    pub warm_start: bool,
+    pub iterative_min_rows: usize,
+    pub sleep_enabled: bool,
+    pub sleep_after: f64,
+}
+
+/// A body pair in local indices, `a < b`.
+pub(crate) type PairKey = (u32, u32);
+
+/// The changing state of a set of bodies (see the module comment).
+pub(crate) struct Region<'s> {
+    pub st: &'s StepStatic<'s>,
+    /// World id of each local body, increasing.
+    pub ids: Vec<u32>,
+    pub bodies: Vec<Body>,
+    /// V-Clip's cached closest features per pair (warm starts of queries).
+    pub features: HashMap<PairKey, Vec<CachedFeatures>>,
+    /// Resting forces of the last solve of each touching pair (warm start).
+    pub warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
+    pub sleep_timer: Vec<f64>,
+    /// Resting system a sleeping body belongs to (its lowest world id).
+    pub sleep_group: Vec<u32>,
+    pub counters: Counters,
+    pub stage: StageSeconds,
+    /// Contacts of the impacts solved in this step (the next step's
+    /// separating-pair skip).
+    pub impacts: Vec<Touching>,
+    /// Total resting normal force on each pair in its latest solve.
+    pub pair_forces: BTreeMap<(BodyId, BodyId), f64>,
+}
+
+/// A body's motion over the current step: start state at `time` (seconds into
+/// the step) with constant force and torque until the end of the step.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Segment {
+    pub state: BodyState,
+    pub time: f64,
+    pub force: Vector3<f64>,
+    pub torque: Vector3<f64>,
+}
+
+/// A body state's pose, as narrowphase takes it.
+pub(crate) fn pose(s: &BodyState) -> Isometry3<f64> {
+    Isometry3::from_parts(s.position.into(), s.orientation)
+}
+
+impl<'s> Region<'s> {
+    pub fn object(&self, i: usize) -> &'s ObjectDef {
+        &self.st.objects[self.bodies[i].object.0 as usize]
+    }
+
+    pub fn moving(&self, i: usize) -> bool {
+        let b = &self.bodies[i];
+        b.activity == Activity::Awake && !matches!(b.kind, BodyKind::Fixed)
+    }
+
+    /// Gravity and the scene's force windows on body `i` at time `t`.
+    pub fn external(&self, i: usize, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let o = self.object(i);
+        let mut f = o.mass * self.st.settings.gravity;
+        let mut tau = Vector3::zeros();
+        for w in self.st.forces {
+            if w.body.0 == self.ids[i] && w.start <= t && t < w.end {
+                f += w.force;
+                tau += w.torque;
+            }
+        }
+        (f, tau)
+    }
+
+    pub fn integrate_segment(&self, i: usize, s: &Segment, h: f64) -> BodyState {
+        integrate(&s.state, self.object(i), self.bodies[i].kind, &s.force, &s.torque, h)
+    }
+
+    /// Body `i` as it is in `state` (a segment's, or one integrated along it).
+    pub fn body_at(&self, i: usize, state: BodyState) -> Body {
+        Body {
+            state,
+            ..self.bodies[i].clone()
+        }
+    }
+
+    /// Candidate pairs from spheres swept between each body's segment start and
+    /// its end state (fast bodies cannot skip a pair this way), with the
+    /// spheres they came from.
+    pub fn broadphase(
+        &mut self,
+        seg: &[Segment],
+        end: &[BodyState],
+    ) -> (Vec<PairKey>, Vec<SphereProxy>) {
+        let clock = Instant::now();
+        let proxies = self.swept_spheres(seg, end);
+        let resting = std::cell::Cell::new(0u64);
+        let pairs = broadphase::candidate_pairs(&proxies, |a, b| {
+            let keep = self.needs_test(a, b);
+            resting.set(resting.get() + u64::from(!keep));
+            keep
+        });
+        self.counters.candidate_pairs += pairs.len() as u64;
+        self.counters.pairs_skipped_resting += resting.get();
+        self.stage.broadphase += clock.elapsed().as_secs_f64();
+        (pairs, proxies)
+    }
+
+    /// The broadphase after an impact event moved only the bodies marked in
+    /// `changed`: pairs among the others stand, so only the changed bodies'
+    /// spheres are tested (same result as `broadphase`, without the sort).
+    pub fn broadphase_after_event(
+        &mut self,
+        seg: &[Segment],
+        end: &[BodyState],
+        previous: &[PairKey],
+        changed: &[bool],
+    ) -> Vec<PairKey> {
+        let clock = Instant::now();
+        let proxies = self.swept_spheres(seg, end);
+        let pairs =
+            broadphase::update_pairs(&proxies, previous, changed, |a, b| self.needs_test(a, b));
+        self.counters.candidate_pairs += pairs.len() as u64;
+        self.stage.broadphase += clock.elapsed().as_secs_f64();
+        pairs
+    }
+
+    /// A pair needs a test when one of its bodies moves and one takes
+    /// impulses: two fixed, two resting, or a driven and a fixed body never
+    /// need one.
+    fn needs_test(&self, a: u32, b: u32) -> bool {
+        let (a, b) = (a as usize, b as usize);
+        (self.moving(a) || self.moving(b))
+            && (self.bodies[a].is_dynamic() || self.bodies[b].is_dynamic())
+    }
+
+    /// Every body's bounding spheres, swept from its segment start to its end
+    /// state, grouped by body.
+    pub fn swept_spheres(&self, seg: &[Segment], end: &[BodyState]) -> Vec<SphereProxy> {
+        let mut proxies = Vec::new();
+        for (i, b) in self.bodies.iter().enumerate() {
+            if b.activity == Activity::Fallen {
+                continue;
+            }
+            self.push_swept(&mut proxies, i as u32, i, &seg[i].state, &end[i]);
+        }
+        proxies
+    }
+
+    /// Body `i`'s spheres swept from `from` to `to`, tagged `tag`.
+    pub fn push_swept(
+        &self,
+        proxies: &mut Vec<SphereProxy>,
+        tag: u32,
+        i: usize,
+        from: &BodyState,
+        to: &BodyState,
+    ) {
+        let o = self.object(i);
+        let (p0, q0) = (from.position, from.orientation);
+        let (p1, q1) = (to.position, to.orientation);
+        let angle = q0.angle_to(&q1);
+        for s in &o.spheres {
+            let c0 = p0 + q0 * s.center;
+            let c1 = p1 + q1 * s.center;
+            // The chord from c0 to c1 misses the arc of a rotating offset by
+            // at most |offset|·(1 − cos(θ/2)) ≤ |offset|·θ²/8; add it.
+            let bulge = s.center.norm() * angle * angle / 8.0;
+            proxies.push(SphereProxy {
+                body: tag,
+                center: 0.5 * (c0 + c1),
+                radius: s.radius + 0.5 * (c1 - c0).norm() + bulge + CONTACT_TOLERANCE,
+            });
+        }
+    }
+
+    /// Of the given touching pairs (at the step's start, or at an impact),
+    /// those whose every contact point separates at the velocities in `seg`
+    /// (relative normal velocity > 0), with a contact normal (out of b
+    /// towards a). SPEC 2.6 does not test such pairs in the next frame; here
+    /// they get a cheaper test that can only skip when it proves the pair
+    /// apart (`narrowphase_skipping_separating`).
+    pub fn separating_pairs(
+        &self,
+        touching: &[Touching],
+        seg: &[Segment],
+    ) -> HashMap<PairKey, Vector3<f64>> {
+        if !self.st.skip_separating {
+            return HashMap::new();
+        }
+        let velocity_at = |i: usize, p: &Vector3<f64>| {
+            self.body_at(i, seg[i].state)
+                .point_velocity(self.object(i), p)
+        };
+        touching
+            .iter()
+            .filter(|t| {
+                t.points.iter().all(|p| {
+                    let v = velocity_at(t.a.index(), &p.point) - velocity_at(t.b.index(), &p.point);
+                    p.normal.dot(&v) > 0.0
+                })
+            })
+            .filter_map(|t| Some(((t.a.0, t.b.0), t.points.first()?.normal)))
+            .collect()
+    }
+
+    /// The end-of-step narrowphase, except for separating pairs whose two
+    /// bodies lie on either side of a plane normal to their old contact
+    /// normal, further apart than the contact tolerance: such a pair cannot
+    /// touch (so V-Clip would give no contacts), and checking every vertex
+    /// against one direction costs less than V-Clip over all close part
+    /// pairs. The test uses the end poses, so a body that turned while
+    /// separating (a corner swinging back) fails it and is tested in full;
+    /// fast pairs still get the time-of-impact sampling. Results equal the
+    /// full narrowphase's for the simulation's purposes (no contacts, no
+    /// overlap); the skipped pair's cached V-Clip features stay as they were.
+    pub fn narrowphase_skipping_separating(
+        &mut self,
+        exec: &mut dyn Executor,
+        pairs: &[PairKey],
+        states: &[BodyState],
+        separating: &HashMap<PairKey, Vector3<f64>>,
+    ) -> Vec<PairResult> {
+        let clock = Instant::now();
+        let skipped: Vec<bool> = pairs
+            .iter()
+            .map(|&(a, b)| {
+                separating.get(&(a, b)).is_some_and(|n| {
+                    let (a, b) = (a as usize, b as usize);
+                    let side_a = (self.object(a), &pose(&states[a]));
+                    let side_b = (self.object(b), &pose(&states[b]));
+                    narrowphase::separation_along(side_a, side_b, n) > CONTACT_TOLERANCE
+                })
+            })
+            .collect();
+        let tested: Vec<PairKey> = pairs
+            .iter()
+            .zip(&skipped)
+            .filter(|(_, skip)| !**skip)
+            .map(|(k, _)| *k)
+            .collect();
+        let skips = pairs.len() - tested.len();
+        self.counters.pairs_skipped_separating += skips as u64;
+        self.stage.narrowphase += clock.elapsed().as_secs_f64();
+        let mut results = self.narrowphase_at(exec, &tested, states).into_iter();
+        skipped
+            .iter()
+            .map(|&skip| {
+                if skip {
+                    PairResult {
+                        distance: f64::INFINITY,
+                        ..Default::default()
+                    }
+                } else {
+                    results.next().unwrap_or_default()
+                }
+            })
+            .collect()
+    }
+
+    pub fn narrowphase_at(
+        &mut self,
+        exec: &mut dyn Executor,
+        pairs: &[PairKey],
+        states: &[BodyState],
+    ) -> Vec<PairResult> {
+        let tasks: Vec<PairTask> = pairs
+            .iter()
+            .map(|&(a, b)| self.pair_task(a, b, &states[a as usize], &states[b as usize]))
+            .collect();
+        self.narrowphase_tasks(exec, tasks)
+    }
+
+    pub fn narrowphase_tasks(
+        &mut self,
+        exec: &mut dyn Executor,
+        tasks: Vec<PairTask>,
+    ) -> Vec<PairResult> {
+        let clock = Instant::now();
+        self.counters.pair_tests += tasks.len() as u64;
+        let results = exec.narrowphase(self.st.objects, tasks);
+        for r in &results {
+            self.counters.vclip_iterations += r.iterations as u64;
+        }
+        self.stage.narrowphase += clock.elapsed().as_secs_f64();
+        results
+    }
+
+    /// A V-Clip task for local pair (a, b) in the given states. Tasks carry
+    /// world ids: a worker's answer must not depend on the region it came from.
+    pub fn pair_task(&self, a: u32, b: u32, sa: &BodyState, sb: &BodyState) -> PairTask {
+        PairTask {
+            a: BodyId(self.ids[a as usize]),
+            b: BodyId(self.ids[b as usize]),
+            object_a: self.bodies[a as usize].object.0,
+            object_b: self.bodies[b as usize].object.0,
+            pose_a: pose(sa),
+            pose_b: pose(sb),
+            warm: self.features.get(&(a, b)).cloned().unwrap_or_default(),
+            contact_tolerance: CONTACT_TOLERANCE,
+        }
+    }
+
+    pub fn touching_from(&self, pairs: &[PairKey], results: &[PairResult]) -> Vec<Touching> {
+        pairs
+            .iter()
+            .zip(results)
+            .filter(|(_, r)| !r.contacts.is_empty())
+            .map(|(&(a, b), r)| Touching {
+                a: BodyId(a),
+                b: BodyId(b),
+                points: r.contacts.clone(),
+            })
+            .collect()
+    }
+}

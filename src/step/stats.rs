@@ -1,0 +1,140 @@
+//! What a run counts and times: per stage, per rank, and the work it did and
+//! skipped. A leaf module: `step` fills these in and `output` writes them.
+
+use crate::body::BodyId;
+use crate::contact::solver::SolveStats;
+use serde::{Deserialize, Serialize};
+
+/// Wall seconds per stage (summary's `stage_seconds`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct StageSeconds {
+    pub integrate: f64,
+    pub broadphase: f64,
+    pub narrowphase: f64,
+    pub time_of_impact: f64,
+    pub build_islands: f64,
+    pub solve_islands: f64,
+    pub communication: f64,
+    pub render: f64,
+}
+
+impl StageSeconds {
+    /// Stages that time-of-impact handling calls into.
+    pub(crate) fn nested(&self) -> f64 {
+        self.broadphase + self.narrowphase + self.build_islands + self.solve_islands
+    }
+}
+
+/// What the simulator did and what it skipped, counted over the run.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Counters {
+    pub steps: u64,
+    pub integrations: u64,
+    pub integrations_skipped_resting: u64,
+    pub candidate_pairs: u64,
+    pub pair_tests: u64,
+    /// Candidate pairs not tested because neither body moves (two fixed
+    /// bodies, two bodies of a resting system, a fixed and a resting body).
+    pub pairs_skipped_resting: u64,
+    /// End-of-step pair tests skipped (SPEC 2.6): pairs that touched at the
+    /// step's start, were separating after its contact solve, and are proven
+    /// apart by more than the contact tolerance along their old normal.
+    pub pairs_skipped_separating: u64,
+    pub vclip_iterations: u64,
+    pub toi_events: u64,
+    pub toi_bisection_queries: u64,
+    /// Impacts found at another impact's instant, in a pair that had begun
+    /// to overlap before it unseen (see `Region::earlier_impact`).
+    pub toi_missed_overlaps: u64,
+    /// Contact islands solved again because a body in them turned by
+    /// `SPIN_TRUST` on the forces of their last solve.
+    pub spin_resolves: u64,
+    /// Most impact events in one step (all groups together).
+    pub max_events_in_step: u64,
+    pub steps_with_events: u64,
+    pub overlaps_accepted: u64,
+    pub islands: u64,
+    pub contacts: u64,
+    pub solve: SolveStats,
+    pub bodies_fallen: u64,
+    pub wakes: u64,
+    /// Interaction groups stepped (`step::group`), over the run.
+    pub groups: u64,
+    /// Most bodies (moving and woken, not the read-only neighbours) in one group.
+    pub largest_group: u64,
+    /// Groups stepped again from the step's start because a realised path
+    /// left its group and met another group or a body outside its input.
+    pub group_reruns: u64,
+}
+
+impl Counters {
+    /// Adds what one group step counted (`steps` and the per-step maxima
+    /// are the caller's).
+    pub(crate) fn add(&mut self, o: &Counters) {
+        self.integrations += o.integrations;
+        self.integrations_skipped_resting += o.integrations_skipped_resting;
+        self.candidate_pairs += o.candidate_pairs;
+        self.pair_tests += o.pair_tests;
+        self.pairs_skipped_resting += o.pairs_skipped_resting;
+        self.pairs_skipped_separating += o.pairs_skipped_separating;
+        self.vclip_iterations += o.vclip_iterations;
+        self.toi_events += o.toi_events;
+        self.toi_bisection_queries += o.toi_bisection_queries;
+        self.toi_missed_overlaps += o.toi_missed_overlaps;
+        self.spin_resolves += o.spin_resolves;
+        self.overlaps_accepted += o.overlaps_accepted;
+        self.islands += o.islands;
+        self.contacts += o.contacts;
+        self.solve.add(&o.solve);
+        self.bodies_fallen += o.bodies_fallen;
+        self.wakes += o.wakes;
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct NumericalFailure {
+    pub body: BodyId,
+    pub stage: &'static str,
+    pub time: f64,
+    pub detail: String,
+}
+
+impl std::fmt::Display for NumericalFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        write!(
+            f,
+            "numerical failure at t = {:.6} s in stage {}: body {} {}",
+            self.time, self.stage, self.body.0, self.detail
+        )
+    }
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+/// One rank's account of a run (summary's `per_rank`).
+pub struct RankSummary {
+    pub rank: u32,
+    /// `coordinator`, `worker` or `renderer`.
+    pub role: String,
+    pub busy_s: f64,
+    pub waiting_s: f64,
+    pub tasks: u64,
+    pub narrowphase_tasks: u64,
+    pub island_tasks: u64,
+    /// Estimated cost (seconds, by the calibrated model) of the work given.
+    pub estimated_cost_s: f64,
+    pub bytes_sent: u64,
+    pub bytes_received: u64,
+    /// Estimated relative speed (1 = as fast as the model's calibration).
+    pub speed: f64,
+    pub frames_rendered: u64,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+/// How often each distributable stage went to workers or ran on rank 0 alone.
+pub struct Distribution {
+    pub narrowphase_distributed: u64,
+    pub narrowphase_local: u64,
+    pub solve_distributed: u64,
+    pub solve_local: u64,
+    pub message_latency_s: f64,
+}

@@ -1,0 +1,593 @@
+//! Time of impact (SPEC 2.6, fig. 3.16): when an overlapping pair first
+//! touched, by sampling fast paths and bisecting; which bodies roll back with
+//! an impact (`impact_group`); and impacts that began before another unseen
+//! (`earlier_impact`). Pure over a `Region`: every query is counted in its
+//! `counters`.
+
+use super::Executor;
+use super::region::{PairKey, Region, Segment};
+use super::contact::SolvedTogether;
+use crate::body::{BodyKind, BodyState};
+use crate::collision::manifold::NormalTurn;
+use crate::collision::narrowphase::{self, CONTACT_TOLERANCE, PairResult, PairTask};
+use std::collections::HashMap;
+
+/// Time-of-impact bisection stops once the gap is below this (metres).
+pub const TOI_GAP: f64 = 0.01 * CONTACT_TOLERANCE;
+/// Near the contact tolerance a point may sink only this much past what it
+/// carried before its impact is placed (`allowed_depth`), so a pair that
+/// closes again after every impact ratchets past the tolerance 10× slower
+/// than by `TOI_GAP`.
+pub const RATCHET_GAP: f64 = 0.1 * TOI_GAP;
+
+/// How deep a contact point that was `carried` deep when its pair was last
+/// solved may be before an impact is placed: `TOI_GAP` deeper, but not past
+/// `CONTACT_TOLERANCE − RATCHET_GAP` unless it already was, and never less
+/// than `RATCHET_GAP` deeper (each event must make progress). With
+/// `TOI_GAP` for every point (before 22ce855) a pair starting a step 9.95 µm
+/// deep ended it at 10.05 µm unseen, and one that closed again after each
+/// impact ratcheted 0.1 µm per event (fragile 1 in docs/stability.md: 9 of
+/// 1200 sweep scenes ended up to 0.14 µm past the tolerance).
+pub(crate) fn allowed_depth(carried: f64) -> f64 {
+    let ceiling = CONTACT_TOLERANCE - RATCHET_GAP;
+    carried + (ceiling - carried).clamp(RATCHET_GAP, TOI_GAP)
+}
+
+/// When each pair's contacts were last solved (the step's start, or an
+/// impact's τ, seconds into the step) and its deepest overlap then: an
+/// overlap its points already had then is carried, not new
+/// (`Region::sinking`). Pairs not listed carried none.
+pub(crate) type SolvedSince = HashMap<PairKey, Since>;
+
+#[derive(Clone, Copy)]
+pub(crate) struct Since {
+    pub time: f64,
+    pub deepest: f64,
+}
+
+impl Region<'_> {
+    /// A body an impact rolls back: a moving one that takes impulses. A
+    /// driven body's path is prescribed, so it keeps its segment (rolling
+    /// it back would only re-round it, differently in each group it meets).
+    fn rolls_back(&self, i: usize) -> bool {
+        self.moving(i) && self.bodies[i].is_dynamic()
+    }
+
+    /// Finds the earliest time of impact over the overlapping pairs (and over
+    /// fast pairs that might pass through each other between samples).
+    pub(crate) fn earliest_impact(
+        &mut self,
+        pairs: &[PairKey],
+        results: &[PairResult],
+        seg: &[Segment],
+        h: f64,
+        accepted: &[PairKey],
+        cache: &mut HashMap<PairKey, Option<f64>>,
+        since: &SolvedSince,
+    ) -> Option<(PairKey, f64)> {
+        let mut best: Option<(PairKey, f64)> = None;
+        for (k, r) in pairs.iter().zip(results) {
+            if accepted.contains(k) {
+                continue;
+            }
+            let tau = match cache.get(k) {
+                Some(&cached) => cached,
+                None => {
+                    let tau = self.time_of_impact(*k, r, seg, h, since);
+                    cache.insert(*k, tau);
+                    tau
+                }
+            };
+            if let Some(tau) = tau {
+                // Earliest first; ties by pair, so the order never depends on iteration.
+                if best.is_none_or(|(bk, bt)| tau < bt || (tau == bt && *k < bk)) {
+                    best = Some((*k, tau));
+                }
+            }
+        }
+        best
+    }
+
+    /// Time of impact of one pair in this step, if it overlaps (or a fast
+    /// pair crossed) beyond what it carried into its segment.
+    fn time_of_impact(
+        &mut self,
+        k: PairKey,
+        r: &PairResult,
+        seg: &[Segment],
+        h: f64,
+        since: &SolvedSince,
+    ) -> Option<f64> {
+        let (a, b) = (k.0 as usize, k.1 as usize);
+        let start = seg[a].time.max(seg[b].time);
+        let since = since.get(&k).copied();
+        let interval = if self.overlaps_more((a, b), r, h, seg, since) {
+            Some(
+                self.first_overlap_sample(a, b, seg, start, h, since)
+                    .unwrap_or((start, h)),
+            )
+        } else {
+            // No overlap at the end: a fast pair may still have crossed.
+            self.first_overlap_sample(a, b, seg, start, h, since)
+        };
+        interval.map(|(lo, hi)| self.bisect(a, b, seg, lo, hi, since))
+    }
+
+    /// An overlap that calls for a rollback: beyond the contact tolerance (or
+    /// with no contact points to resolve it), with a contact point past the
+    /// depth it may reach since the pair was last solved (`sinking`). An overlap
+    /// carried in (rounding, or one left by a step that could not resolve
+    /// it) is mended by the overlap recovery, not by rolling back to a
+    /// moment that has already passed.
+    fn overlaps_more(
+        &self,
+        (a, b): (usize, usize),
+        r: &PairResult,
+        t: f64,
+        seg: &[Segment],
+        since: Option<Since>,
+    ) -> bool {
+        r.needs_rollback(CONTACT_TOLERANCE)
+            && (r.contacts.is_empty() || self.sinking((a, b), r, t, seg, since) > 0.0)
+    }
+
+    /// How far the pair's deepest-sinking contact point at `t` (result `r`)
+    /// is past its `allowed_depth`, of what the same two body points carried
+    /// at `since`, when the pair was last solved (positive calls for an
+    /// impact); a point apart then carried no overlap, and none
+    /// carried more than the pair's deepest point then (the old measure, so
+    /// every rollback it called for is still called for). While the
+    /// pair's deepest overlap then was the measure for every point, a new
+    /// point of a pair already 7 µm deep landed 7 µm deep unseen: a bolt rolling on the 40-gon rim of its shaft's end, each
+    /// rim corner in turn landing so and the overlap recovery lifting it out
+    /// again, gained energy and wobbled for 50 s (docs/stability.md,
+    /// fragile 6).
+    ///
+    /// Each point's two body points (A's and B's, at the point at `t`) are
+    /// taken back to `since` with their bodies; their gap then, along the
+    /// normal turned back with the feature it belongs to (`NormalTurn`), is
+    /// the gap at `t` plus n·(x_A − x_B) at `since` (to the overlap times
+    /// the turn, 1e-8 m at most).
+    fn sinking(
+        &self,
+        (a, b): (usize, usize),
+        r: &PairResult,
+        t: f64,
+        seg: &[Segment],
+        since: Option<Since>,
+    ) -> f64 {
+        // `r.depth` is already the deepest of the contact points.
+        let Some(Since {
+            time: t0,
+            deepest: carried,
+        }) = since
+        else {
+            return r.depth - allowed_depth(0.0);
+        };
+        if r.contacts.is_empty() {
+            return r.depth - allowed_depth(carried);
+        }
+        let at = |i: usize, t: f64| self.integrate_segment(i, &seg[i], t - seg[i].time);
+        let (sa, sb, sa0, sb0) = (at(a, t), at(b, t), at(a, t0), at(b, t0));
+        let back_a = sa0.orientation * sa.orientation.inverse();
+        let back_b = sb0.orientation * sb.orientation.inverse();
+        r.contacts
+            .iter()
+            .map(|c| {
+                let xa0 = sa0.position + back_a * (c.point - sa.position);
+                let xb0 = sb0.position + back_b * (c.point - sb.position);
+                let n0 = match c.turns {
+                    NormalTurn::WithA => back_a * c.normal,
+                    NormalTurn::WithB => back_b * c.normal,
+                    NormalTurn::Edges(ea, eb) => {
+                        let m = (back_a * ea).cross(&(back_b * eb));
+                        let m = m / m.norm();
+                        if m.dot(&c.normal) >= 0.0 { m } else { -m }
+                    }
+                };
+                let gap0 = c.separation + n0.dot(&(xa0 - xb0));
+                -c.separation - allowed_depth((-gap0).clamp(0.0, carried))
+            })
+            .fold(r.depth - allowed_depth(carried), f64::max)
+    }
+
+    /// For pairs that move by more than their thickness during the step,
+    /// samples the path densely enough that one cannot pass through the other
+    /// unseen; returns the interval before the first overlapping sample.
+    fn first_overlap_sample(
+        &mut self,
+        a: usize,
+        b: usize,
+        seg: &[Segment],
+        start: f64,
+        h: f64,
+        since: Option<Since>,
+    ) -> Option<(f64, f64)> {
+        // Each body at both ends of the interval: its travel, its swing and
+        // the approach-speed bound all come from these four states.
+        let ends =
+            |i: usize| [start, h].map(|t| self.integrate_segment(i, &seg[i], t - seg[i].time));
+        let (ends_a, ends_b) = (ends(a), ends(b));
+        // Relative travel of the centres, plus how far each body's corners
+        // can swing about its centre: a spinning body whose centre barely
+        // moves can still sweep a corner through a thin neighbour (a random
+        // scene lost 10 mm that way between two samples of a pair that was
+        // never sampled).
+        let swing = |i: usize, ends: &[BodyState; 2]| -> f64 {
+            ends.iter()
+                .map(|s| self.spin_bound(i, s))
+                .fold(0.0, f64::max)
+                * self.object(i).outer_radius()
+        };
+        let centres =
+            (ends_a[1].position - ends_a[0].position) - (ends_b[1].position - ends_b[0].position);
+        let travel = centres.norm() + (swing(a, &ends_a) + swing(b, &ends_b)) * (h - start);
+        let thickness = self
+            .object(a)
+            .min_thickness
+            .min(self.object(b).min_thickness);
+        if travel <= 0.5 * thickness {
+            return None;
+        }
+        // Samples every half thickness of relative travel, and further where
+        // the pair is far apart: from a gap g no point can close it before
+        // g / (bound on the approach speed) has passed (conservative
+        // advancement), so nothing is skipped there either.
+        let samples = ((travel / (0.5 * thickness)).ceil() as usize).min(10_000);
+        let spacing = (h - start) / samples as f64;
+        let speed = self.approach_speed_bound((a, &ends_a), (b, &ends_b));
+        let mut prev = start;
+        let mut t = (start + spacing).min(h);
+        loop {
+            let (r, task) = self.query_task_at(a, b, seg, t);
+            if self.overlaps_more((a, b), &r, t, seg, since) {
+                return Some((prev, t));
+            }
+            if t >= h {
+                return None;
+            }
+            // A lower bound on the gap: V-Clip's distance over the part pairs
+            // it tested, and for the others the gap between the bodies'
+            // enclosing spheres (exact enough where conservative advancement
+            // pays: far apart).
+            let gap = if r.penetrating {
+                0.0
+            } else {
+                let centres =
+                    (task.pose_a.translation.vector - task.pose_b.translation.vector).norm();
+                let spheres =
+                    centres - self.object(a).outer_radius() - self.object(b).outer_radius();
+                r.distance.min(spheres.max(0.0))
+            };
+            prev = t;
+            t = (t + spacing.max(gap / speed)).min(h);
+        }
+    }
+
+    /// Upper bound of body `i`'s angular speed in state `s`: |L| / I_min
+    /// (|ω| itself may peak inside a segment as a body wobbles; |L| cannot).
+    fn spin_bound(&self, i: usize, s: &BodyState) -> f64 {
+        match self.bodies[i].kind {
+            BodyKind::Dynamic => s.angular_momentum.norm() / self.object(i).principal_moments.min(),
+            BodyKind::Fixed => 0.0,
+            BodyKind::Driven {
+                angular_velocity, ..
+            } => angular_velocity.norm(),
+        }
+    }
+
+    /// Upper bound of the speed at which any point of `a` approaches any
+    /// point of `b` over an interval, from each body's states at its two
+    /// ends: relative linear speed plus each body's largest angular speed
+    /// |L| / I_min times its outer radius. With force and torque constant
+    /// over a segment, |v| and |L| are convex in time and peak at its ends
+    /// (|ω| itself may not, as a body wobbles).
+    fn approach_speed_bound(
+        &self,
+        (a, ends_a): (usize, &[BodyState; 2]),
+        (b, ends_b): (usize, &[BodyState; 2]),
+    ) -> f64 {
+        let reach = |i: usize, s: &BodyState| self.spin_bound(i, s) * self.object(i).outer_radius();
+        (0..2)
+            .map(|k| {
+                let (sa, sb) = (&ends_a[k], &ends_b[k]);
+                (sa.velocity - sb.velocity).norm() + reach(a, sa) + reach(b, sb)
+            })
+            .fold(1e-12, f64::max)
+    }
+
+    /// The pair at time `t`, with contact points (their depth tells an
+    /// overlap carried into the segment from a new one).
+    /// V-Clip alone at time `t`: `None` when the pair overlaps, else its gap.
+    fn gap_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> Option<f64> {
+        let sa = self.integrate_segment(a, &seg[a], t - seg[a].time);
+        let sb = self.integrate_segment(b, &seg[b], t - seg[b].time);
+        self.counters.toi_bisection_queries += 1;
+        let task = self.pair_task(a as u32, b as u32, &sa, &sb);
+        narrowphase::overlap_probe(&self.st.objects, &task)
+    }
+
+    fn query_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> PairResult {
+        self.query_task_at(a, b, seg, t).0
+    }
+
+    fn query_task_at(
+        &mut self,
+        a: usize,
+        b: usize,
+        seg: &[Segment],
+        t: f64,
+    ) -> (PairResult, PairTask) {
+        let sa = self.integrate_segment(a, &seg[a], t - seg[a].time);
+        let sb = self.integrate_segment(b, &seg[b], t - seg[b].time);
+        self.counters.toi_bisection_queries += 1;
+        let task = self.pair_task(a as u32, b as u32, &sa, &sb);
+        (narrowphase::query_pair(&self.st.objects, &task), task)
+    }
+
+    /// Bisection for the touching instant (SPEC 2.6, fig. 3.16): `lo` is known
+    /// apart (or with no contact point deeper than when the pair was last
+    /// solved, `since`), `hi` overlapping deeper. Halves until the interval is what the pair's
+    /// relative speed covers in a 0.1 µm gap (`TOI_GAP`), or a separated `lo`
+    /// is within that gap. At 4.4 m/s (a 1 m drop) that is 23 ns: impact times
+    /// stay well within 1e-6 s over many bounces, for about
+    /// log2(v·dt / 0.1 µm) ≈ 19 V-Clip queries per impact.
+    ///
+    /// When V-Clip finds the pair apart at `lo` by more than `TOI_GAP`, any
+    /// overlap is "after the impact", and V-Clip alone decides each half: no
+    /// contact points, whose separating-axis search over edge pairs costs
+    /// far more than V-Clip (7× the whole bisection on the load profile's
+    /// 224-face spheres). The answer is then an instant where the pair is
+    /// apart by at most `TOI_GAP`. That pass makes no progress when the
+    /// pair, just solved at `lo`, still closes: then, as for a pair
+    /// touching or overlapping at `lo`, the depth of the contact points
+    /// decides, and a point may sink to its `allowed_depth` (`TOI_GAP`
+    /// deeper than it was at `since`, less near the tolerance) before the
+    /// impact is placed.
+    fn bisect(
+        &mut self,
+        a: usize,
+        b: usize,
+        seg: &[Segment],
+        lo: f64,
+        hi: f64,
+        since: Option<Since>,
+    ) -> f64 {
+        // Forces are constant over a segment, so speeds peak at its ends.
+        let speed = self
+            .relative_speed_bound(a, b, seg, lo)
+            .max(self.relative_speed_bound(a, b, seg, hi))
+            .max(1e-9);
+        let resolution = (TOI_GAP / speed).max(1e-13 * self.st.settings.dt);
+        // Only for a pair clearly apart at `lo`. One touching there (V-Clip's
+        // verdict flipping at rounding level as a body slides along a wall)
+        // got impacts 0.15 µs apart, each at the first instant V-Clip called
+        // it apart, until the step's 256 events ran out; its real sinking
+        // 2.5 ms later was never reached (random sweep seed 4, scene 89).
+        if self.gap_at(a, b, seg, lo).is_some_and(|gap| gap > TOI_GAP) {
+            let tau = self.bisect_apart(a, b, seg, lo, hi, resolution);
+            if tau > lo {
+                return tau;
+            }
+        }
+        self.bisect_depth(a, b, seg, lo, hi, since, resolution)
+    }
+
+    /// Bisection on "does V-Clip find an overlap"; `lo` is apart.
+    fn bisect_apart(
+        &mut self,
+        a: usize,
+        b: usize,
+        seg: &[Segment],
+        mut lo: f64,
+        mut hi: f64,
+        resolution: f64,
+    ) -> f64 {
+        while hi - lo > resolution {
+            let mid = 0.5 * (lo + hi);
+            match self.gap_at(a, b, seg, mid) {
+                None => hi = mid,
+                Some(gap) => {
+                    lo = mid;
+                    if gap <= TOI_GAP {
+                        break;
+                    }
+                }
+            }
+        }
+        lo
+    }
+
+    /// Bisection on "has a contact point sunk past its allowed depth since
+    /// `since`" (`sinking`).
+    #[allow(clippy::too_many_arguments)]
+    fn bisect_depth(
+        &mut self,
+        a: usize,
+        b: usize,
+        seg: &[Segment],
+        mut lo: f64,
+        mut hi: f64,
+        since: Option<Since>,
+        resolution: f64,
+    ) -> f64 {
+        for _ in 0..64 {
+            if hi - lo <= resolution {
+                break;
+            }
+            let mid = 0.5 * (lo + hi);
+            let r = self.query_at(a, b, seg, mid);
+            // `overlaps_more`, or a point sunk past its allowed depth within
+            // the tolerance: together, one `sinking` call.
+            if r.penetrating
+                && (r.contacts.is_empty() || self.sinking((a, b), &r, mid, seg, since) > 0.0)
+            {
+                hi = mid;
+            } else {
+                lo = mid;
+                if !r.penetrating && r.distance <= TOI_GAP {
+                    break;
+                }
+            }
+        }
+        lo
+    }
+
+    /// The earliest impact before `tau` of a pair of the group found
+    /// overlapping at τ beyond what it carried into its segment (the pair
+    /// `chosen` and the pairs accepted in this step aside), by bisection
+    /// from its segment's start.
+    pub(crate) fn earlier_impact(
+        &mut self,
+        chosen: PairKey,
+        tau: f64,
+        (group_pairs, at_tau): (&[PairKey], &[PairResult]),
+        seg: &[Segment],
+        since: &SolvedSince,
+        accepted: &[PairKey],
+    ) -> Option<(PairKey, f64)> {
+        let mut best: Option<(PairKey, f64)> = None;
+        for (&k, r) in group_pairs.iter().zip(at_tau) {
+            let (a, b) = (k.0 as usize, k.1 as usize);
+            let since = since.get(&k).copied();
+            // An accepted pair made no progress at its own impact: asking
+            // for it again would stall the step (the pair it was found
+            // through would bring it back forever).
+            if k == chosen
+                || accepted.contains(&k)
+                || !self.overlaps_more((a, b), r, tau, seg, since)
+            {
+                continue;
+            }
+            let start = seg[a].time.max(seg[b].time);
+            if start >= tau {
+                continue;
+            }
+            let t = self.bisect(a, b, seg, start, tau, since);
+            if t < tau && best.is_none_or(|(bk, bt)| t < bt || (t == bt && k < bk)) {
+                best = Some((k, t));
+            }
+        }
+        best
+    }
+
+    /// Upper bound of how fast any point of `a` approaches any point of `b`
+    /// at time `t` (linear plus angular speed times outer radius).
+    fn relative_speed_bound(&self, a: usize, b: usize, seg: &[Segment], t: f64) -> f64 {
+        let bound = |i: usize| {
+            let s = self.integrate_segment(i, &seg[i], t - seg[i].time);
+            let o = self.object(i);
+            (
+                s.velocity,
+                self.body_at(i, s).angular_velocity(o).norm() * o.outer_radius(),
+            )
+        };
+        let (va, wa) = bound(a);
+        let (vb, wb) = bound(b);
+        (va - vb).norm() + wa + wb
+    }
+
+    /// Bodies that must roll back with an impact of `pair` at τ: the pair's
+    /// moving bodies and every moving body in contact with them at τ, and so
+    /// on (the contact island at τ, which the impact's LCP must hold whole).
+    /// Found outwards from the pair, querying each candidate pair of a member
+    /// at τ; returns the members (sorted) with their states at τ, every pair
+    /// queried (each pair of a member) and its result at τ.
+    ///
+    /// Every other body keeps its path: none touches the group at τ, and
+    /// where the group's new paths reach one later in the step, that pair's
+    /// own time of impact (recomputed from τ for every pair of a member)
+    /// makes it an event of its own. Events therefore stay in time order,
+    /// and an impact in a pile re-solves its contact island only, not every
+    /// body whose swept spheres chain to it (in a pour of 1000 that chain
+    /// held about half of the bodies).
+    pub(crate) fn impact_group(
+        &mut self,
+        exec: &mut dyn Executor,
+        pair: PairKey,
+        tau: f64,
+        pairs: &[PairKey],
+        seg: &[Segment],
+        solved_together: &SolvedTogether,
+    ) -> (Vec<(usize, BodyState)>, Vec<PairKey>, Vec<PairResult>) {
+        let n = self.bodies.len();
+        let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for &(a, b) in pairs {
+            neighbours[a as usize].push(b);
+            neighbours[b as usize].push(a);
+        }
+        // Bodies in the group or queued for it.
+        let mut claimed = vec![false; n];
+        let mut group: Vec<usize> = Vec::new();
+        let mut frontier: Vec<usize> = Vec::new();
+        for i in [pair.0 as usize, pair.1 as usize] {
+            if self.rolls_back(i) && !claimed[i] {
+                claimed[i] = true;
+                frontier.push(i);
+            }
+        }
+        let mut at_tau: HashMap<usize, BodyState> = HashMap::new();
+        let mut state = |world: &Region, i: usize| {
+            *at_tau
+                .entry(i)
+                .or_insert_with(|| world.integrate_segment(i, &seg[i], tau - seg[i].time))
+        };
+        let mut queried: std::collections::HashSet<PairKey> = Default::default();
+        let (mut group_pairs, mut results) = (Vec::new(), Vec::new());
+        while !frontier.is_empty() {
+            // Bodies whose segment forces came from one contact solve hold
+            // each other's reactions: they roll back together, or one keeps
+            // a force whose reaction the other no longer has (momentum
+            // appears from nowhere).
+            let mut k = 0;
+            while k < frontier.len() {
+                for &j in solved_together.partners(frontier[k]) {
+                    if !claimed[j] && self.rolls_back(j) {
+                        claimed[j] = true;
+                        frontier.push(j);
+                    }
+                }
+                k += 1;
+            }
+            frontier.sort_unstable();
+            group.extend(&frontier);
+            // This layer's pairs, each once, in a fixed order.
+            let mut layer: Vec<PairKey> = Vec::new();
+            for &i in &frontier {
+                for &j in &neighbours[i] {
+                    let k = ((i as u32).min(j), (i as u32).max(j));
+                    if queried.insert(k) {
+                        layer.push(k);
+                    }
+                }
+            }
+            let tasks: Vec<PairTask> = layer
+                .iter()
+                .map(|&(a, b)| {
+                    let (sa, sb) = (state(self, a as usize), state(self, b as usize));
+                    self.pair_task(a, b, &sa, &sb)
+                })
+                .collect();
+            let layer_results = self.narrowphase_tasks(exec, tasks);
+            let mut next: Vec<usize> = Vec::new();
+            for (&(a, b), r) in layer.iter().zip(&layer_results) {
+                if r.contacts.is_empty() && !r.penetrating {
+                    continue;
+                }
+                for j in [a as usize, b as usize] {
+                    if !claimed[j] && self.rolls_back(j) {
+                        claimed[j] = true;
+                        next.push(j);
+                    }
+                }
+            }
+            next.sort_unstable();
+            group_pairs.extend(layer);
+            results.extend(layer_results);
+            frontier = next;
+        }
+        group.sort_unstable();
+        let states = group.into_iter().map(|i| (i, state(self, i))).collect();
+        (states, group_pairs, results)
+    }
+}
