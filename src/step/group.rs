@@ -262,6 +262,169 @@ pub(crate) struct GroupState {
     pub spin_resolves: SpinResolves,
 }
 
+/// An impact time ordered for the queue (finite, so `total_cmp` is the
+/// usual order).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ImpactTime(f64);
+
+impl Eq for ImpactTime {}
+impl PartialOrd for ImpactTime {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for ImpactTime {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&o.0)
+    }
+}
+
+/// The group's candidate pairs, kept so that an event costs what the bodies
+/// it moved cost: each pair's latest result and time of impact, each body's
+/// partners, its swept spheres, and a queue of impacts ordered by (time,
+/// pair), the order in which the events are taken.
+struct PairBook {
+    results: BTreeMap<PairKey, PairResult>,
+    /// Each body's candidate partners, ascending.
+    partners: Vec<Vec<u32>>,
+    /// Impact time of each pair whose time is known (`None`: no impact).
+    toi: HashMap<PairKey, Option<f64>>,
+    queue: BTreeSet<(ImpactTime, PairKey)>,
+    /// Pairs whose time of impact is still to be found.
+    dirty: BTreeSet<PairKey>,
+    /// Each body's swept spheres and the box around them (`None`: fallen).
+    spheres: Vec<Option<(Vec<SphereProxy>, Vector3<f64>, Vector3<f64>)>>,
+}
+
+impl PairBook {
+    fn new(g: &Region, seg: &[Segment], end: &[BodyState], pairs: Vec<PairKey>, results: Vec<PairResult>) -> Self {
+        let n = g.bodies.len();
+        let mut book = PairBook {
+            results: BTreeMap::new(),
+            partners: vec![Vec::new(); n],
+            toi: HashMap::new(),
+            queue: BTreeSet::new(),
+            dirty: BTreeSet::new(),
+            spheres: vec![None; n],
+        };
+        for i in 0..n {
+            book.sweep(g, i, seg, end);
+        }
+        for (k, r) in pairs.into_iter().zip(results) {
+            book.insert(k, r);
+        }
+        book
+    }
+
+    fn insert(&mut self, (a, b): PairKey, r: PairResult) {
+        for (x, y) in [(a, b), (b, a)] {
+            let list = &mut self.partners[x as usize];
+            if let Err(at) = list.binary_search(&y) {
+                list.insert(at, y);
+            }
+        }
+        self.results.insert((a, b), r);
+        self.dirty.insert((a, b));
+    }
+
+    /// Drops every pair of body `i`.
+    fn forget(&mut self, i: usize) {
+        for j in std::mem::take(&mut self.partners[i]) {
+            let k = ((i as u32).min(j), (i as u32).max(j));
+            let list = &mut self.partners[j as usize];
+            if let Ok(at) = list.binary_search(&(i as u32)) {
+                list.remove(at);
+            }
+            self.results.remove(&k);
+            self.dirty.remove(&k);
+            if let Some(Some(t)) = self.toi.remove(&k) {
+                self.queue.remove(&(ImpactTime(t), k));
+            }
+        }
+    }
+
+    /// Body `i`'s spheres swept along its current segment.
+    fn sweep(&mut self, g: &Region, i: usize, seg: &[Segment], end: &[BodyState]) {
+        if g.bodies[i].activity == Activity::Fallen {
+            self.spheres[i] = None;
+            return;
+        }
+        let mut s = Vec::new();
+        g.push_swept(&mut s, i as u32, i, &seg[i].state, &end[i]);
+        let r = |p: &SphereProxy| Vector3::repeat(p.radius);
+        let lo = s.iter().map(|p| p.center - r(p)).fold(Vector3::repeat(f64::INFINITY), |m, x| m.inf(&x));
+        let hi = s.iter().map(|p| p.center + r(p)).fold(Vector3::repeat(f64::NEG_INFINITY), |m, x| m.sup(&x));
+        self.spheres[i] = Some((s, lo, hi));
+    }
+
+    /// Candidate pairs of the bodies in `changed` (sorted) against every
+    /// body of the group, each pair once, ascending: the broadphase after an
+    /// event, at the cost of the bodies it moved.
+    fn candidates(&self, g: &Region, changed: &[usize]) -> Vec<PairKey> {
+        let mut pairs = Vec::new();
+        for &i in changed {
+            let Some((si, lo_i, hi_i)) = &self.spheres[i] else {
+                continue;
+            };
+            for (j, other) in self.spheres.iter().enumerate() {
+                let Some((sj, lo_j, hi_j)) = other else {
+                    continue;
+                };
+                if j == i
+                    || (j < i && changed.binary_search(&j).is_ok())
+                    || !(0..3).all(|k| lo_i[k] <= hi_j[k] && lo_j[k] <= hi_i[k])
+                {
+                    continue;
+                }
+                let hit = si.iter().any(|p| {
+                    sj.iter().any(|q| {
+                        let reach = p.radius + q.radius;
+                        (p.center - q.center).norm_squared() <= reach * reach
+                    })
+                });
+                let k = ((i as u32).min(j as u32), (i as u32).max(j as u32));
+                if hit && g.needs_test(k.0, k.1) {
+                    pairs.push(k);
+                }
+            }
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        pairs
+    }
+
+    /// The earliest impact over the pairs not accepted: finds the times of
+    /// the pairs still dirty first. Ties go to the lower pair, so the order
+    /// never depends on the order of the work.
+    fn earliest(
+        &mut self,
+        g: &mut Region,
+        seg: &[Segment],
+        h: f64,
+        since: &SolvedSince,
+        accepted: &BTreeSet<PairKey>,
+    ) -> Option<(PairKey, f64)> {
+        for k in std::mem::take(&mut self.dirty) {
+            if accepted.contains(&k) {
+                continue;
+            }
+            let tau = g.time_of_impact(k, &self.results[&k], seg, h, since);
+            self.toi.insert(k, tau);
+            if let Some(t) = tau {
+                self.queue.insert((ImpactTime(t), k));
+            }
+        }
+        self.queue.first().map(|&(t, k)| (k, t.0))
+    }
+
+    /// Takes pair `k` out of the running for this step.
+    fn accept(&mut self, k: PairKey) {
+        if let Some(Some(t)) = self.toi.get(&k) {
+            self.queue.remove(&(ImpactTime(*t), k));
+        }
+    }
+}
+
 /// The group step: every impact event of the group in time order. An event
 /// rolls the bodies that must move with it back to its instant τ, solves
 /// their contacts there, re-integrates them to the step's end and retests
@@ -277,8 +440,8 @@ pub(crate) fn step_group<'s>(
     let GroupState {
         mut seg,
         mut end,
-        mut pairs,
-        mut results,
+        pairs,
+        results,
         mut since,
         mut separating,
         together: mut solved_together,
@@ -289,17 +452,16 @@ pub(crate) fn step_group<'s>(
     let moving = (0..n)
         .filter(|&i| g.moving(i) && g.bodies[i].is_dynamic())
         .count();
+    let mut book = PairBook::new(&g, &seg, &end, pairs, results);
     // Which bodies have left their predicted path (rolled back or woken).
     let mut left = vec![false; n];
     let mut pieces: Vec<SphereProxy> = Vec::new();
     let mut events = 0usize;
-    let mut accepted: Vec<PairKey> = Vec::new();
+    let mut accepted: BTreeSet<PairKey> = BTreeSet::new();
     let mut last_event: Option<(PairKey, f64)> = None;
-    let mut toi_cache: HashMap<PairKey, Option<f64>> = HashMap::new();
     let budget = MIN_EVENTS_PER_STEP.max(EVENTS_PER_MOVING_BODY * moving);
     loop {
-        let violation =
-            g.earliest_impact(&pairs, &results, &seg, h, &accepted, &mut toi_cache, &since);
+        let violation = book.earliest(&mut g, &seg, h, &since, &accepted);
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
         // rolls back and is solved as at an impact. Not before the latest
@@ -317,12 +479,13 @@ pub(crate) fn step_group<'s>(
             spin_resolves.take(pair.0 as usize);
         } else if events >= budget {
             // Out of events: keep the small overlap rather than stall the step.
-            accepted.push(pair);
+            accepted.insert(pair);
+            book.accept(pair);
             g.counters.overlaps_accepted += 1;
             continue;
         }
         let (mut group_states, mut group_pairs, mut at_tau) =
-            g.impact_group(exec, pair, tau, &pairs, &seg, &solved_together);
+            g.impact_group(exec, pair, tau, &book.partners, &seg, &solved_together);
         // An overlap beyond what a pair carried, found at τ in another
         // pair of the group, began before τ unseen: the end-of-step test
         // misses a body that dips into another and is out again by the
@@ -337,11 +500,12 @@ pub(crate) fn step_group<'s>(
             (pair, tau) = earlier;
             g.counters.toi_missed_overlaps += 1;
             (group_states, group_pairs, at_tau) =
-                g.impact_group(exec, pair, tau, &pairs, &seg, &solved_together);
+                g.impact_group(exec, pair, tau, &book.partners, &seg, &solved_together);
         }
         if last_event == Some((pair, tau)) {
             // No progress: keep the small overlap rather than stall the step.
-            accepted.push(pair);
+            accepted.insert(pair);
+            book.accept(pair);
             g.counters.overlaps_accepted += 1;
             continue;
         }
@@ -376,9 +540,7 @@ pub(crate) fn step_group<'s>(
         members.extend(woken);
         members.sort_unstable();
         members.dedup();
-        let mut is_member = vec![false; n];
         for &i in &members {
-            is_member[i] = true;
             left[i] = true;
         }
         let solved = g.contact_phase(exec, &touching_now, &members, &mut seg, h - tau);
@@ -395,25 +557,20 @@ pub(crate) fn step_group<'s>(
             end[i] = g.integrate_segment(i, &seg[i], h - tau);
         }
         g.counters.integrations += members.len() as u64;
-        toi_cache.retain(|&(a, b), _| !is_member[a as usize] && !is_member[b as usize]);
-        // The members' new paths may reach new bodies of the group: redo
-        // the broadphase for them, and the narrowphase for their pairs.
-        let new_pairs = g.broadphase_after_event(&seg, &end, &pairs, &is_member);
-        let mut old: HashMap<PairKey, PairResult> = pairs.iter().copied().zip(results).collect();
-        let redo: Vec<PairKey> = new_pairs
-            .iter()
-            .copied()
-            .filter(|&(a, b)| {
-                is_member[a as usize] || is_member[b as usize] || !old.contains_key(&(a, b))
-            })
-            .collect();
+        // The members' new paths may reach new bodies of the group: their
+        // pairs are found and tested again; every other pair stands.
+        let clock = Instant::now();
+        for &i in &members {
+            book.forget(i);
+            book.sweep(&g, i, &seg, &end);
+        }
+        let redo = book.candidates(&g, &members);
+        g.counters.candidate_pairs += redo.len() as u64;
+        g.stage.broadphase += clock.elapsed().as_secs_f64();
         let redone = g.narrowphase_skipping_separating(exec, &redo, &end, &separating);
-        let mut fresh: HashMap<PairKey, PairResult> = redo.into_iter().zip(redone).collect();
-        results = new_pairs
-            .iter()
-            .map(|k| fresh.remove(k).or_else(|| old.remove(k)).unwrap_or_default())
-            .collect();
-        pairs = new_pairs;
+        for (k, r) in redo.into_iter().zip(redone) {
+            book.insert(k, r);
+        }
     }
     for i in 0..n {
         if left[i] {
@@ -422,6 +579,7 @@ pub(crate) fn step_group<'s>(
     }
     g.counters.toi_events += events as u64;
     g.stage.time_of_impact += clock.elapsed().as_secs_f64() - (g.stage.nested() - nested_before);
+    let (pairs, results) = book.results.into_iter().unzip();
     Ok(GroupRun {
         region: g,
         end,

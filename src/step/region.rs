@@ -135,29 +135,10 @@ impl<'s> Region<'s> {
         (pairs, proxies)
     }
 
-    /// The broadphase after an impact event moved only the bodies marked in
-    /// `changed`: pairs among the others stand, so only the changed bodies'
-    /// spheres are tested (same result as `broadphase`, without the sort).
-    pub fn broadphase_after_event(
-        &mut self,
-        seg: &[Segment],
-        end: &[BodyState],
-        previous: &[PairKey],
-        changed: &[bool],
-    ) -> Vec<PairKey> {
-        let clock = Instant::now();
-        let proxies = self.swept_spheres(seg, end);
-        let pairs =
-            broadphase::update_pairs(&proxies, previous, changed, |a, b| self.needs_test(a, b));
-        self.counters.candidate_pairs += pairs.len() as u64;
-        self.stage.broadphase += clock.elapsed().as_secs_f64();
-        pairs
-    }
-
     /// A pair needs a test when one of its bodies moves and one takes
     /// impulses: two fixed, two resting, or a driven and a fixed body never
     /// need one.
-    fn needs_test(&self, a: u32, b: u32) -> bool {
+    pub fn needs_test(&self, a: u32, b: u32) -> bool {
         let (a, b) = (a as usize, b as usize);
         (self.moving(a) || self.moving(b))
             && (self.bodies[a].is_dynamic() || self.bodies[b].is_dynamic())

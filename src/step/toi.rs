@@ -10,7 +10,7 @@ use super::contact::SolvedTogether;
 use crate::body::{BodyKind, BodyState};
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::{self, CONTACT_TOLERANCE, PairResult, PairTask};
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 
 /// Time-of-impact bisection stops once the gap is below this (metres).
 pub const TOI_GAP: f64 = 0.01 * CONTACT_TOLERANCE;
@@ -53,44 +53,9 @@ impl Region<'_> {
         self.moving(i) && self.bodies[i].is_dynamic()
     }
 
-    /// Finds the earliest time of impact over the overlapping pairs (and over
-    /// fast pairs that might pass through each other between samples).
-    pub(crate) fn earliest_impact(
-        &mut self,
-        pairs: &[PairKey],
-        results: &[PairResult],
-        seg: &[Segment],
-        h: f64,
-        accepted: &[PairKey],
-        cache: &mut HashMap<PairKey, Option<f64>>,
-        since: &SolvedSince,
-    ) -> Option<(PairKey, f64)> {
-        let mut best: Option<(PairKey, f64)> = None;
-        for (k, r) in pairs.iter().zip(results) {
-            if accepted.contains(k) {
-                continue;
-            }
-            let tau = match cache.get(k) {
-                Some(&cached) => cached,
-                None => {
-                    let tau = self.time_of_impact(*k, r, seg, h, since);
-                    cache.insert(*k, tau);
-                    tau
-                }
-            };
-            if let Some(tau) = tau {
-                // Earliest first; ties by pair, so the order never depends on iteration.
-                if best.is_none_or(|(bk, bt)| tau < bt || (tau == bt && *k < bk)) {
-                    best = Some((*k, tau));
-                }
-            }
-        }
-        best
-    }
-
     /// Time of impact of one pair in this step, if it overlaps (or a fast
     /// pair crossed) beyond what it carried into its segment.
-    fn time_of_impact(
+    pub(crate) fn time_of_impact(
         &mut self,
         k: PairKey,
         r: &PairResult,
@@ -247,17 +212,14 @@ impl Region<'_> {
                 return None;
             }
             // A lower bound on the gap: V-Clip's distance over the part pairs
-            // it tested, and for the others the gap between the bodies'
-            // enclosing spheres (exact enough where conservative advancement
-            // pays: far apart).
+            // it tested, and for the others the gap between their part
+            // spheres.
             let gap = if r.penetrating {
                 0.0
             } else {
-                let centres =
-                    (task.pose_a.translation.vector - task.pose_b.translation.vector).norm();
-                let spheres =
-                    centres - self.object(a).outer_radius() - self.object(b).outer_radius();
-                r.distance.min(spheres.max(0.0))
+                r.distance
+                    .min(narrowphase::far_part_gap(self.st.objects, &task))
+                    .max(0.0)
             };
             prev = t;
             t = (t + spacing.max(gap / speed)).min(h);
@@ -444,7 +406,7 @@ impl Region<'_> {
         (group_pairs, at_tau): (&[PairKey], &[PairResult]),
         seg: &[Segment],
         since: &SolvedSince,
-        accepted: &[PairKey],
+        accepted: &BTreeSet<PairKey>,
     ) -> Option<(PairKey, f64)> {
         let mut best: Option<(PairKey, f64)> = None;
         for (&k, r) in group_pairs.iter().zip(at_tau) {
@@ -491,7 +453,7 @@ impl Region<'_> {
     /// moving bodies and every moving body in contact with them at τ, and so
     /// on (the contact island at τ, which the impact's LCP must hold whole).
     /// Found outwards from the pair, querying each candidate pair of a member
-    /// at τ; returns the members (sorted) with their states at τ, every pair
+    /// at τ (`neighbours`: each body's candidate partners, ascending); returns the members (sorted) with their states at τ, every pair
     /// queried (each pair of a member) and its result at τ.
     ///
     /// Every other body keeps its path: none touches the group at τ, and
@@ -506,16 +468,11 @@ impl Region<'_> {
         exec: &mut dyn Executor,
         pair: PairKey,
         tau: f64,
-        pairs: &[PairKey],
+        neighbours: &[Vec<u32>],
         seg: &[Segment],
         solved_together: &SolvedTogether,
     ) -> (Vec<(usize, BodyState)>, Vec<PairKey>, Vec<PairResult>) {
         let n = self.bodies.len();
-        let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
-        for &(a, b) in pairs {
-            neighbours[a as usize].push(b);
-            neighbours[b as usize].push(a);
-        }
         // Bodies in the group or queued for it.
         let mut claimed = vec![false; n];
         let mut group: Vec<usize> = Vec::new();
