@@ -102,6 +102,9 @@ pub struct PairResult {
     pub features: Vec<CachedFeatures>,
     pub iterations: u32,
     pub part_pairs_tested: u32,
+    /// From B's closest point to A's, of the closest part pair found apart
+    /// (zero when none was): a separating direction to try first.
+    pub closest_axis: Vector3<f64>,
 }
 
 impl PairResult {
@@ -184,8 +187,12 @@ pub fn separation_along(
     low_a - high_b
 }
 
-/// V-Clip alone: `None` when a part pair overlaps, else the smallest gap.
-pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
+/// V-Clip alone: the smallest gap over the close part pairs when none
+/// overlaps (`Ok`, +∞ when none is close), else the local penetration depth
+/// of the first part pair found overlapping (`Err`, ≤ 0; V-Clip's measure,
+/// not a minimum translation distance, but continuous with the gap where
+/// the pair begins to overlap, which is what a secant step needs).
+pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Result<f64, f64> {
     let (oa, ob) = (
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
@@ -195,11 +202,11 @@ pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
     for pair in close_part_pairs(oa, ob, task) {
         let prox = part_proximity(oa, ob, task, &warm, pair);
         if prox.penetrating {
-            return None;
+            return Err(prox.distance.min(0.0));
         }
         gap = gap.min(prox.distance);
     }
-    Some(gap)
+    Ok(gap)
 }
 
 /// A lower bound on the gap between the part pairs that `query_pair` and
@@ -209,6 +216,13 @@ pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
 /// pairs it bounds the bodies' distance from below far more tightly than
 /// their enclosing spheres do (a nut's 32 wedges against a bolt's parts).
 pub fn far_part_gap(objects: &[ObjectDef], task: &PairTask) -> f64 {
+    part_sphere_gap(objects, task, task.contact_tolerance)
+}
+
+/// The smallest gap between the part spheres of the two bodies, over the
+/// part pairs whose gap exceeds `beyond` (`f64::NEG_INFINITY`: every part
+/// pair, a lower bound on the bodies' distance that needs no V-Clip query).
+pub fn part_sphere_gap(objects: &[ObjectDef], task: &PairTask, beyond: f64) -> f64 {
     let (oa, ob) = (
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
@@ -223,7 +237,7 @@ pub fn far_part_gap(objects: &[ObjectDef], task: &PairTask) -> f64 {
         let ca = task.pose_a * Point3::from(pa.sphere.center);
         for (pb, cb) in ob.parts.iter().zip(&centres_b) {
             let g = (ca - cb).norm() - pa.sphere.radius - pb.sphere.radius;
-            if g > task.contact_tolerance {
+            if g > beyond {
                 gap = gap.min(g);
             }
         }
@@ -319,6 +333,9 @@ fn add_part_pair(
         part_b: ib as u16,
         features: prox.features,
     });
+    if !prox.penetrating && prox.distance < out.distance {
+        out.closest_axis = prox.point_a - prox.point_b;
+    }
     out.distance = out.distance.min(if prox.penetrating {
         prox.distance.min(0.0)
     } else {
