@@ -187,12 +187,9 @@ pub fn separation_along(
     low_a - high_b
 }
 
-/// V-Clip alone: the smallest gap over the close part pairs when none
-/// overlaps (`Ok`, +∞ when none is close), else the local penetration depth
-/// of the first part pair found overlapping (`Err`, ≤ 0; V-Clip's measure,
-/// not a minimum translation distance, but continuous with the gap where
-/// the pair begins to overlap, which is what a secant step needs).
-pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Result<f64, f64> {
+/// V-Clip alone: `None` when a part pair overlaps, else the smallest gap
+/// over the close part pairs (+∞ when none is close).
+pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
     let (oa, ob) = (
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
@@ -202,11 +199,11 @@ pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Result<f64, f64>
     for pair in close_part_pairs(oa, ob, task) {
         let prox = part_proximity(oa, ob, task, &warm, pair);
         if prox.penetrating {
-            return Err(prox.distance.min(0.0));
+            return None;
         }
         gap = gap.min(prox.distance);
     }
-    Ok(gap)
+    Some(gap)
 }
 
 /// A lower bound on the gap between the part pairs that `query_pair` and

@@ -59,6 +59,8 @@ enum Sampled {
         lo: f64,
         hi: f64,
         gap: Option<(f64, f64)>,
+        /// The apart sample before `lo` and its distance, if any.
+        before: Option<(f64, f64)>,
     },
 }
 
@@ -84,13 +86,17 @@ impl Region<'_> {
         let start = seg[a].time.max(seg[b].time);
         let since = since.get(&k).copied();
         let end_overlaps = self.overlaps_more((a, b), r, h, seg, since);
-        let end = (end_overlaps, r.closest_axis);
-        let interval = match self.first_overlap_sample(a, b, seg, start, h, since, end) {
-            Sampled::Slow if end_overlaps => Some((start, h, None)),
+        let interval = match self.first_overlap_sample(a, b, seg, start, h, since, end_overlaps) {
+            Sampled::Slow if end_overlaps => Some((start, h, None, None)),
             Sampled::Slow | Sampled::Apart => None,
-            Sampled::Between { lo, hi, gap } => Some((lo, hi, gap)),
+            Sampled::Between {
+                lo,
+                hi,
+                gap,
+                before,
+            } => Some((lo, hi, gap, before)),
         };
-        interval.map(|(lo, hi, gap)| self.bisect(a, b, seg, lo, hi, since, gap))
+        interval.map(|(lo, hi, gap, before)| self.bisect(a, b, seg, lo, hi, since, (gap, before)))
     }
 
     /// An overlap that calls for a rollback: beyond the contact tolerance (or
@@ -175,8 +181,7 @@ impl Region<'_> {
     /// For pairs that move by more than their thickness during the step,
     /// samples the path densely enough that one cannot pass through the other
     /// unseen; returns the interval before the first overlapping sample
-    /// (`end_overlaps`: the end-of-step result, already known, overlaps;
-    /// `hint_axis`: its closest points' line).
+    /// (`end_overlaps`: the end-of-step result, already known, overlaps).
     #[allow(clippy::too_many_arguments)]
     fn first_overlap_sample(
         &mut self,
@@ -186,7 +191,7 @@ impl Region<'_> {
         start: f64,
         h: f64,
         since: Option<Since>,
-        (end_overlaps, hint_axis): (bool, Vector3<f64>),
+        end_overlaps: bool,
     ) -> Sampled {
         // Each body at both ends of the interval: its travel, its swing and
         // the approach-speed bound all come from these four states.
@@ -198,14 +203,12 @@ impl Region<'_> {
         // moves can still sweep a corner through a thin neighbour (a random
         // scene lost 10 mm that way between two samples of a pair that was
         // never sampled).
-        let reach = |i: usize, ends: &[BodyState; 2]| -> f64 {
-            let torque_free = seg[i].torque == Vector3::zeros();
-            ends.iter()
-                .map(|s| self.spin_bound(i, s, torque_free))
-                .fold(0.0, f64::max)
-                * self.object(i).outer_radius()
-        };
-        let swing = reach(a, &ends_a) + reach(b, &ends_b);
+        let span = h - start;
+        let swing = self.swing_rate(seg, a, &ends_a, span) + self.swing_rate(seg, b, &ends_b, span);
+        let turn = [
+            self.turn_bound(seg, a, &ends_a, span),
+            self.turn_bound(seg, b, &ends_b, span),
+        ];
         let centres =
             (ends_a[1].position - ends_a[0].position) - (ends_b[1].position - ends_b[0].position);
         let travel = centres.norm() + swing * (h - start);
@@ -222,22 +225,24 @@ impl Region<'_> {
         // advancement), so nothing is skipped there either.
         let samples = ((travel / (0.5 * thickness)).ceil() as usize).min(10_000);
         let spacing = (h - start) / samples as f64;
-        let speed = self.approach_speed_bound(seg, (a, &ends_a), (b, &ends_b));
+        let speed = self.approach_speed_bound(seg, (a, &ends_a), (b, &ends_b), span);
         // The relative acceleration of the centres (constant on the segments).
         let accel = seg[a].force / self.object(a).mass - seg[b].force / self.object(b).mass;
-        // The first sample: as far as the part spheres' gap and the planes
-        // along the end-of-step closest points' line and the centres' line
-        // allow at the start, without a query.
+        // The first sample: as far as the part spheres' gap and the plane
+        // along the centres' line allow at the start, without a query (not
+        // from the end-of-step result: the separating-pair skip may have
+        // left it empty, and that must not change an answer).
         let first = {
             let (sa, sb) = (&ends_a[0], &ends_b[0]);
             let task = self.pair_task(a as u32, b as u32, sa, sb);
             let gap = narrowphase::part_sphere_gap(self.st.objects, &task, f64::NEG_INFINITY);
-            [hint_axis, sa.position - sb.position]
-                .into_iter()
-                .map(|n| self.closing_time((a, sa), (b, sb), n, accel, swing))
-                .fold(gap.max(0.0) / speed, f64::max)
+            let centres = sa.position - sb.position;
+            let along = self.closing_time((a, sa), (b, sb), centres, accel, (swing, turn));
+            along.max(gap.max(0.0) / speed)
         };
         let (mut prev, mut prev_gap) = (start, None);
+        // The apart sample before `prev`, and its V-Clip distance.
+        let mut before: Option<(f64, f64)> = None;
         let mut t = (start + spacing.max(first)).min(h);
         loop {
             if t >= h {
@@ -247,6 +252,7 @@ impl Region<'_> {
                         lo: prev,
                         hi: h,
                         gap: prev_gap,
+                        before,
                     }
                 } else {
                     Sampled::Apart
@@ -259,6 +265,7 @@ impl Region<'_> {
                     lo: prev,
                     hi: t,
                     gap: prev_gap,
+                    before,
                 };
             }
             // A lower bound on the gap: V-Clip's distance over the part pairs
@@ -281,8 +288,9 @@ impl Region<'_> {
             let along = axes
                 .into_iter()
                 .flatten()
-                .map(|n| self.closing_time((a, &sa), (b, &sb), n, accel, swing))
+                .map(|n| self.closing_time((a, &sa), (b, &sb), n, accel, (swing, turn)))
                 .fold(0.0, f64::max);
+            before = prev_gap.map(|(distance, _)| (prev, distance));
             prev = t;
             prev_gap = (!r.penetrating).then_some((r.distance, gap));
             t = (t + spacing.max(gap / speed).max(along)).min(h);
@@ -292,21 +300,26 @@ impl Region<'_> {
     /// How long two bodies in states `sa`, `sb` stay apart at least, by the
     /// planes normal to `axis` (`n`, out of B towards A): when
     /// s = min_A n·x − max_B n·x is positive it bounds their distance from
-    /// below, and it changes no faster than the centres' relative velocity
-    /// along n (linear in time: constant forces) less each body's spin
-    /// times its reach about its centre (`swing`, bounded over the
-    /// segment): s(t + Δ) ≥ s + (u − swing)·Δ + ½ a·Δ². The first root of
-    /// that bound, or +∞ when it never reaches zero; 0 when no such plane
-    /// separates them. Conservative advancement on the gap alone crawls
-    /// where bodies pass each other close by (|v| is mostly along the gap);
-    /// this sees that they do not close.
+    /// below, and it changes at the n-velocity of the support points:
+    /// the centres' relative velocity along n (linear in time: constant
+    /// forces) plus n·(ω × r) for each body, r the support point's offset,
+    /// |r| ≤ its reach R. That last term is bounded two ways: |ω| R at most
+    /// (`swing`, bounded over the segment), and |n × ω| R now plus R |ω̇| Δ
+    /// later (`turn`: R and the bound on |ω̇|, per body), which sees that a
+    /// nut spinning flat on its axis does not swing across a plane normal
+    /// to that axis. So s(t + Δ) ≥ s + (u − c₀)·Δ + (½ a − c₁)·Δ², once
+    /// with c₀ = swing, c₁ = 0 and once with the second bound; the larger
+    /// of the two first roots (+∞ when a bound never reaches zero), or 0
+    /// when no such plane separates them. Conservative advancement on the
+    /// gap alone crawls where bodies pass each other close by (|v| is
+    /// mostly along the gap); this sees that they do not close.
     fn closing_time(
         &self,
         (a, sa): (usize, &BodyState),
         (b, sb): (usize, &BodyState),
         axis: Vector3<f64>,
         accel: Vector3<f64>,
-        swing: f64,
+        (swing, turn): (f64, [(f64, f64); 2]),
     ) -> f64 {
         let Some(n) = axis.try_normalize(1e-12) else {
             return 0.0;
@@ -320,34 +333,84 @@ impl Region<'_> {
             return 0.0;
         }
         // gap + slope·Δ + curve·Δ² = 0, first positive root (stable form).
-        let slope = (sa.velocity - sb.velocity).dot(&n) - swing;
+        let first_root = |slope: f64, curve: f64| {
+            let disc = slope * slope - 4.0 * curve * gap;
+            if (slope >= 0.0 && curve >= 0.0) || disc < 0.0 {
+                f64::INFINITY
+            } else {
+                2.0 * gap / (-slope + disc.sqrt())
+            }
+        };
+        let u = (sa.velocity - sb.velocity).dot(&n);
+        let across = |i: usize, s: &BodyState| -> f64 {
+            let omega = match self.bodies[i].kind {
+                BodyKind::Fixed => Vector3::zeros(),
+                BodyKind::Driven {
+                    angular_velocity, ..
+                } => angular_velocity,
+                BodyKind::Dynamic => self.body_at(i, *s).angular_velocity(self.object(i)),
+            };
+            n.cross(&omega).norm()
+        };
+        let c0 = across(a, sa) * turn[0].0 + across(b, sb) * turn[1].0;
+        let c1 = turn[0].0 * turn[0].1 + turn[1].0 * turn[1].1;
         let curve = 0.5 * accel.dot(&n);
-        let disc = slope * slope - 4.0 * curve * gap;
-        if (slope >= 0.0 && curve >= 0.0) || disc < 0.0 {
-            return f64::INFINITY;
-        }
-        2.0 * gap / (-slope + disc.sqrt())
+        first_root(u - swing, curve).max(first_root(u - c0, curve - c1))
     }
 
-    /// Upper bound of body `i`'s angular speed along its segment, from a
-    /// state `s` on it: |L| / I_min (|ω| itself may peak inside a segment as
-    /// a body wobbles; |L| cannot). Without torque the rotational energy T
-    /// is constant too, and |ω|² = Σ Πₖ²/Iₖ² ≤ (1/I_min) Σ Πₖ²/Iₖ = 2T/I_min,
-    /// which for a bolt tumbling end over end (T = |L|²/2I_t, I_t ≈ 5 I_min)
-    /// is about 2.2 times tighter. The splitting integrator keeps T to
-    /// O((hω)⁴) along a segment, well inside the 1 % margin.
-    fn spin_bound(&self, i: usize, s: &BodyState, torque_free: bool) -> f64 {
+    /// Each body's reach about its centre and a bound on |ω̇| over the
+    /// interval between `ends` (`closing_time`'s `turn`): from Euler's
+    /// equations, ω̇ = I⁻¹(τ − ω × L) in the world frame, so
+    /// |ω̇| ≤ (|τ| + |ω|·|L|) / I_min with the interval's bounds on |ω| and |L|.
+    fn turn_bound(&self, seg: &[Segment], i: usize, ends: &[BodyState; 2], span: f64) -> (f64, f64) {
+        let o = self.object(i);
+        let reach = o.outer_radius();
+        match self.bodies[i].kind {
+            BodyKind::Dynamic => {
+                let w = self.spin_bound(i, ends, &seg[i].torque, span);
+                let l = ends
+                    .iter()
+                    .map(|s| s.angular_momentum.norm())
+                    .fold(0.0, f64::max);
+                let i_min = o.principal_moments.min();
+                (reach, 1.01 * (seg[i].torque.norm() + w * l) / i_min)
+            }
+            BodyKind::Fixed | BodyKind::Driven { .. } => (reach, 0.0),
+        }
+    }
+
+    /// Upper bound of body `i`'s angular speed over an interval of its
+    /// segment, from the states at its ends: |L| / I_min at the larger end
+    /// (|ω| itself may peak inside a segment as a body wobbles; |L|, linear
+    /// in time under a constant torque, cannot), and a bound from the
+    /// rotational energy T, often far tighter: |ω|² = Σ Πₖ²/Iₖ² ≤
+    /// (1/I_min) Σ Πₖ²/Iₖ = 2T/I_min, and T changes at τ·ω, so over a span
+    /// Δ from either end T ≤ T₀ + |τ| Δ √(2T_max/I_min), whose root in
+    /// √T_max gives |ω| ≤ √(2/I_min)·(c + √(c² + 4T₀))/2 with
+    /// c = |τ| Δ √(2/I_min). For a bolt tumbling end over end (T = |L|²/2I_t,
+    /// I_t ≈ 5 I_min) that is about 2.2 times tighter than |L|/I_min. The
+    /// splitting integrator keeps T to O((hω)⁴) along a segment, well inside
+    /// the 1 % margin.
+    fn spin_bound(&self, i: usize, ends: &[BodyState; 2], torque: &Vector3<f64>, span: f64) -> f64 {
         match self.bodies[i].kind {
             BodyKind::Dynamic => {
                 let o = self.object(i);
                 let i_min = o.principal_moments.min();
-                let by_momentum = s.angular_momentum.norm() / i_min;
-                if !torque_free {
-                    return by_momentum;
-                }
-                let omega = self.body_at(i, *s).angular_velocity(o);
-                let two_t = omega.dot(&s.angular_momentum).max(0.0);
-                by_momentum.min(1.01 * (two_t / i_min).sqrt())
+                let by_momentum = ends
+                    .iter()
+                    .map(|s| s.angular_momentum.norm() / i_min)
+                    .fold(0.0, f64::max);
+                let k = (2.0 / i_min).sqrt();
+                let c = torque.norm() * span * k;
+                let by_energy = ends
+                    .iter()
+                    .map(|s| {
+                        let omega = self.body_at(i, *s).angular_velocity(o);
+                        let t0 = 0.5 * omega.dot(&s.angular_momentum).max(0.0);
+                        1.01 * k * 0.5 * (c + (c * c + 4.0 * t0).sqrt())
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                by_momentum.min(by_energy)
             }
             BodyKind::Fixed => 0.0,
             BodyKind::Driven {
@@ -356,41 +419,40 @@ impl Region<'_> {
         }
     }
 
+    /// How far body `i`'s points can swing about its centre, per second,
+    /// between `ends` on its segment: its spin bound times its reach.
+    fn swing_rate(&self, seg: &[Segment], i: usize, ends: &[BodyState; 2], span: f64) -> f64 {
+        self.spin_bound(i, ends, &seg[i].torque, span) * self.object(i).outer_radius()
+    }
+
     /// Upper bound of the speed at which any point of `a` approaches any
     /// point of `b` over an interval, from each body's states at its two
-    /// ends: relative linear speed plus each body's largest angular speed
-    /// |L| / I_min times its outer radius. With force and torque constant
-    /// over a segment, |v| and |L| are convex in time and peak at its ends
-    /// (|ω| itself may not, as a body wobbles).
+    /// ends: relative linear speed (with a constant force, |Δv| is convex
+    /// in time and peaks at an end) plus each body's swing rate.
     fn approach_speed_bound(
         &self,
         seg: &[Segment],
         (a, ends_a): (usize, &[BodyState; 2]),
         (b, ends_b): (usize, &[BodyState; 2]),
+        span: f64,
     ) -> f64 {
-        let reach = |i: usize, s: &BodyState| {
-            let torque_free = seg[i].torque == Vector3::zeros();
-            self.spin_bound(i, s, torque_free) * self.object(i).outer_radius()
-        };
-        (0..2)
-            .map(|k| {
-                let (sa, sb) = (&ends_a[k], &ends_b[k]);
-                (sa.velocity - sb.velocity).norm() + reach(a, sa) + reach(b, sb)
-            })
-            .fold(1e-12, f64::max)
+        let linear = (0..2)
+            .map(|k| (ends_a[k].velocity - ends_b[k].velocity).norm())
+            .fold(0.0, f64::max);
+        (linear + self.swing_rate(seg, a, ends_a, span) + self.swing_rate(seg, b, ends_b, span))
+            .max(1e-12)
     }
 
-    /// V-Clip alone at time `t`: when the pair is apart, its gap and a
-    /// lower bound on the bodies' distance (that gap, and the part spheres
-    /// of the part pairs V-Clip did not test); else (`Err`) V-Clip's local
-    /// depth, ≤ 0.
-    fn gap_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> Result<(f64, f64), f64> {
+    /// V-Clip alone at time `t`: `None` when the pair overlaps, else its gap
+    /// and a lower bound on the bodies' distance (that gap, and the part
+    /// spheres of the part pairs V-Clip did not test).
+    fn gap_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> Option<(f64, f64)> {
         let (sa, sb) = self.states_at(a, b, seg, t);
         self.counters.toi_bisection_queries += 1;
         let task = self.pair_task(a as u32, b as u32, &sa, &sb);
         let gap = narrowphase::overlap_probe(self.st.objects, &task)?;
         let far = narrowphase::far_part_gap(self.st.objects, &task);
-        Ok((gap, gap.min(far).max(0.0)))
+        Some((gap, gap.min(far).max(0.0)))
     }
 
     /// The pair at time `t`, with contact points (their depth tells an
@@ -457,7 +519,7 @@ impl Region<'_> {
         lo: f64,
         hi: f64,
         since: Option<Since>,
-        lo_gap: Option<(f64, f64)>,
+        (lo_gap, before): (Option<(f64, f64)>, Option<(f64, f64)>),
     ) -> f64 {
         // Forces are constant over a segment, so speeds peak at its ends.
         let speed = self
@@ -473,11 +535,12 @@ impl Region<'_> {
         // (`lo_gap`: V-Clip's distance at `lo` and a lower bound on the
         // bodies' distance, when sampling found them.)
         let gap = match lo_gap {
-            Some(gap) => Ok(gap),
+            Some(gap) => Some(gap),
             None => self.gap_at(a, b, seg, lo),
         };
-        if let Ok((gap, bound)) = gap.and_then(|g| if g.0 > TOI_GAP { Ok(g) } else { Err(0.0) }) {
-            let tau = self.bisect_apart(a, b, seg, (lo, gap, bound), hi, resolution);
+        if let Some((gap, bound)) = gap.filter(|&(gap, _)| gap > TOI_GAP) {
+            let before = before.filter(|_| lo_gap.is_some());
+            let tau = self.bisect_apart(a, b, seg, (lo, gap, bound), before, hi, resolution);
             if tau > lo {
                 return tau;
             }
@@ -489,13 +552,17 @@ impl Region<'_> {
     /// (V-Clip) and by at least `bound` (the bodies), `hi` overlaps. Two
     /// steps shorten the halving, neither of them trusted for the answer
     /// (that is still a queried instant apart by at most `TOI_GAP`, or the
-    /// resolution): a secant step on V-Clip's signed gap between the two
-    /// ends, aimed at half of `TOI_GAP` (the gap is nearly linear over the
-    /// short intervals left, so it lands within two or three queries where
-    /// halving takes 14 to 19), taken every other query so the interval
-    /// still at least halves in two; and conservative advancement, taken
-    /// instead of the midpoint when it lies beyond it: no point closes a
-    /// gap g before g / (approach-speed bound) has passed.
+    /// resolution): a secant step through the last two instants found apart,
+    /// aimed to leave a share of the gap (`aim`; the gap is nearly linear
+    /// over the short intervals left, so a few steps take it below
+    /// `TOI_GAP` where halving takes 14 to 19), again after each one that
+    /// halved the interval or the gap and else after one midpoint; and
+    /// conservative advancement, first of all (with `lo` it gives the
+    /// secant its slope) and wherever it lies beyond the midpoint: no point
+    /// closes a gap g before g / (approach-speed bound) has passed, so that
+    /// instant is apart. Only distances of pairs apart
+    /// steer it: V-Clip's depth of an overlap is local to the features it
+    /// ended on, and so to its warm start, which must not change an answer.
     #[allow(clippy::too_many_arguments)]
     fn bisect_apart(
         &mut self,
@@ -503,42 +570,65 @@ impl Region<'_> {
         b: usize,
         seg: &[Segment],
         (mut lo, mut gap_lo, mut bound): (f64, f64, f64),
+        mut before: Option<(f64, f64)>,
         mut hi: f64,
         resolution: f64,
     ) -> f64 {
         let ends = |i: usize| [lo, hi].map(|t| self.integrate_segment(i, &seg[i], t - seg[i].time));
-        let speed = self.approach_speed_bound(seg, (a, &ends(a)), (b, &ends(b)));
-        // V-Clip's depth at `hi`, once a query there has found it.
-        let mut depth_hi: Option<f64> = None;
+        let speed = self.approach_speed_bound(seg, (a, &ends(a)), (b, &ends(b)), hi - lo);
+        // `before`: the instant found apart before `lo`, and its gap. A
+        // secant step that did not halve the interval gives its turn to
+        // the midpoint.
         let mut secant_turn = true;
+        // The share of the gap left at `lo` that a secant step aims to leave:
+        // a gap that closes ever faster (an accelerating approach, a
+        // turning corner) makes the secant land just past the touching
+        // instant, so it aims short, and shorter after each overshoot.
+        let mut aim = 0.1;
         while hi - lo > resolution {
             let width = hi - lo;
             let mid = lo + 0.5 * width;
             let advanced = lo + bound / speed;
-            let t = match depth_hi {
-                Some(d) if secant_turn && gap_lo.is_finite() => {
-                    let target = 0.5 * TOI_GAP;
-                    let s = lo + width * (gap_lo - target) / (gap_lo - d);
+            let closing = before
+                .map(|(t1, g1)| (g1 - gap_lo) / (lo - t1))
+                .filter(|&rate| rate > 0.0 && gap_lo.is_finite());
+            let t = match closing {
+                Some(rate) if secant_turn => {
+                    let leave = (aim * gap_lo).max(0.5 * TOI_GAP);
+                    let s = lo + (gap_lo - leave) / rate;
                     s.clamp(lo + 1e-3 * width, hi - 1e-3 * width)
                 }
                 _ if advanced > mid && advanced < hi => advanced,
+                // No second instant apart yet: the advanced one is apart
+                // (however short the step), and with `lo` it gives the
+                // secant its slope.
+                None if before.is_none() => advanced.clamp(lo + 1e-4 * width, mid),
                 _ => mid,
             };
-            secant_turn = !secant_turn;
+            let secant = secant_turn && closing.is_some();
+            let gap_before = gap_lo;
             match self.gap_at(a, b, seg, t) {
-                Err(d) => {
+                None => {
                     hi = t;
-                    depth_hi = Some(d);
+                    if secant {
+                        aim = (4.0 * aim).min(0.5);
+                    }
                 }
-                Ok((gap, at_least)) => {
+                Some((gap, at_least)) => {
+                    before = Some((lo, gap_lo));
                     lo = t;
                     gap_lo = gap;
                     bound = at_least;
                     if gap <= TOI_GAP {
                         break;
                     }
+                    if secant {
+                        aim *= 0.1;
+                    }
                 }
             }
+            // Progress: the interval or the gap left at least halved.
+            secant_turn = !secant || hi - lo <= 0.5 * width || gap_lo <= 0.5 * gap_before;
         }
         lo
     }
@@ -608,7 +698,7 @@ impl Region<'_> {
             if start >= tau {
                 continue;
             }
-            let t = self.bisect(a, b, seg, start, tau, since, None);
+            let t = self.bisect(a, b, seg, start, tau, since, (None, None));
             if t < tau && best.is_none_or(|(bk, bt)| t < bt || (t == bt && k < bk)) {
                 best = Some((k, t));
             }
