@@ -110,6 +110,50 @@ pub fn update_pairs(
     pairs
 }
 
+/// Pairs of a sphere of `moving` with one of `fixed`, as (fixed body,
+/// moving body), and pairs among `moving` (as `candidate_pairs` gives them),
+/// together, sorted and without duplicates; two spheres of `fixed` are never
+/// tested. For a few moving spheres against a crowd: `fixed` is sorted
+/// once along its widest axis, and each moving sphere looks at the spheres
+/// that start within its reach there (O((m + f) log f + k)), where the
+/// full sweep would walk every pair of the crowd.
+pub fn crossing_pairs(fixed: &[SphereProxy], moving: &[SphereProxy]) -> Vec<(u32, u32)> {
+    let mut pairs = candidate_pairs(moving, |_, _| true);
+    if fixed.is_empty() || moving.is_empty() {
+        return pairs;
+    }
+    // The few spheres far larger than the rest (a floor, a wall) are
+    // tested against every moving sphere; the window below is as wide as
+    // the largest of the others.
+    let mut radii: Vec<f64> = fixed.iter().map(|p| p.radius).collect();
+    let middle = radii.len() / 2;
+    let median = *radii.select_nth_unstable_by(middle, f64::total_cmp).1;
+    let big = |p: &SphereProxy| p.radius > 8.0 * median;
+    let axis = widest_axis(fixed);
+    let lo = |p: &SphereProxy| p.center[axis] - p.radius;
+    let mut order: Vec<usize> = (0..fixed.len()).filter(|&i| !big(&fixed[i])).collect();
+    order.sort_unstable_by(|&i, &j| lo(&fixed[i]).total_cmp(&lo(&fixed[j])).then(i.cmp(&j)));
+    let large: Vec<usize> = (0..fixed.len()).filter(|&i| big(&fixed[i])).collect();
+    let starts: Vec<f64> = order.iter().map(|&i| lo(&fixed[i])).collect();
+    let widest = order.iter().map(|&i| fixed[i].radius).fold(0.0, f64::max);
+    for m in moving {
+        // A sphere of the window reaches m on the axis only if it starts
+        // within [m.lo − 2·widest, m.hi].
+        let from = starts.partition_point(|&x| x < lo(m) - 2.0 * widest);
+        let to = starts.partition_point(|&x| x <= m.center[axis] + m.radius);
+        for &i in order[from..to].iter().chain(&large) {
+            let f = &fixed[i];
+            let reach = f.radius + m.radius;
+            if (f.center - m.center).norm_squared() <= reach * reach {
+                pairs.push((f.body, m.body));
+            }
+        }
+    }
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs
+}
+
 /// One body's spheres in the proxy list and the box around them.
 struct BodyGroup {
     body: u32,

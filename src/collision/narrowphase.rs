@@ -229,9 +229,21 @@ pub fn part_sphere_gap(objects: &[ObjectDef], task: &PairTask, beyond: f64) -> f
         .iter()
         .map(|pb| task.pose_b * Point3::from(pb.sphere.center))
         .collect();
+    // B's part spheres all lie within `reach_b` of B's origin: a part of A
+    // that far from all of them already is skipped whole.
+    let reach_b = ob
+        .parts
+        .iter()
+        .map(|pb| pb.sphere.center.norm() + pb.sphere.radius)
+        .fold(0.0, f64::max);
+    let origin_b = Point3::from(task.pose_b.translation.vector);
     let mut gap = f64::INFINITY;
     for pa in &oa.parts {
         let ca = task.pose_a * Point3::from(pa.sphere.center);
+        let nearest = (ca - origin_b).norm() - pa.sphere.radius - reach_b;
+        if nearest >= gap {
+            continue;
+        }
         for (pb, cb) in ob.parts.iter().zip(&centres_b) {
             let g = (ca - cb).norm() - pa.sphere.radius - pb.sphere.radius;
             if g > beyond {
