@@ -54,8 +54,9 @@ pub(crate) struct StepStart {
     /// The broadphase's candidate pairs (sorted) and their end-of-step results.
     pub pairs: Vec<PairKey>,
     pub results: Vec<PairResult>,
-    /// The predicted paths' swept spheres, tagged with world ids.
-    pub proxies: Vec<SphereProxy>,
+    /// The predicted paths' swept spheres, tagged with world ids, grown by
+    /// `GROUP_MARGIN` (what the groups are formed by).
+    pub grown: Vec<SphereProxy>,
     pub since: SolvedSince,
     pub separating: HashMap<PairKey, Vector3<f64>>,
     /// Bodies solved together at the step's start (islands of two or more).
@@ -97,23 +98,19 @@ pub(crate) fn plan_groups(world: &Region, start: &StepStart) -> Vec<GroupPlan> {
         }
     }
     // Bodies whose predicted spheres, grown by `GROUP_MARGIN`, meet are
-    // grouped too: an impact that sends one a little off its prediction
-    // then stays inside its group instead of re-running it and the group
-    // it meets.
-    {
-        let grown: Vec<SphereProxy> = start
-            .proxies
-            .iter()
-            .map(|p| SphereProxy {
-                radius: p.radius * (1.0 + GROUP_MARGIN),
-                ..*p
-            })
-            .collect();
-        let moving = |i: u32| world.moving(i as usize);
-        for (a, b) in broadphase::candidate_pairs(&grown, |a, b| {
-            dynamic(a) && dynamic(b) && (moving(a) || moving(b))
-        }) {
-            sets.union(a, b);
+    // grouped too, and a fixed or driven body that close is read, also by
+    // a resting body (it may wake in the step and move along it): an
+    // impact that sends a body a little off its prediction then stays
+    // inside its group instead of re-running it and the group it meets.
+    // `step_group` relies on this: a realised path inside the grown
+    // prediction cannot meet anything outside the group.
+    let mut near_fixed: Vec<(u32, u32)> = Vec::new();
+    for (a, b) in broadphase::candidate_pairs(&start.grown, |a, b| dynamic(a) || dynamic(b)) {
+        match (dynamic(a), dynamic(b)) {
+            (true, true) => sets.union(a, b),
+            (true, false) => near_fixed.push((a, b)),
+            (false, true) => near_fixed.push((b, a)),
+            (false, false) => {}
         }
     }
     // A resting system is reached whole (its roots are its lowest member).
@@ -138,6 +135,11 @@ pub(crate) fn plan_groups(world: &Region, start: &StepStart) -> Vec<GroupPlan> {
             if let Some(plan) = by_root.get_mut(&sets.find(i)) {
                 plan.members.push(i);
             }
+        }
+    }
+    for (d, x) in near_fixed {
+        if let Some(plan) = by_root.get_mut(&sets.find(d)) {
+            plan.neighbours.push(x);
         }
     }
     let mut plans: Vec<GroupPlan> = by_root.into_values().collect();
@@ -446,6 +448,23 @@ impl PairBook {
         self.queue.first().map(|&(t, k)| (k, t.0))
     }
 
+    /// The latest segment start of the bodies connected to body `i` by
+    /// candidate pairs (itself included).
+    fn latest_start(&self, seg: &[Segment], i: usize) -> f64 {
+        let mut seen = BTreeSet::from([i as u32]);
+        let mut frontier = vec![i as u32];
+        let mut latest = seg[i].time;
+        while let Some(j) = frontier.pop() {
+            for &k in &self.partners[j as usize] {
+                if seen.insert(k) {
+                    latest = latest.max(seg[k as usize].time);
+                    frontier.push(k);
+                }
+            }
+        }
+        latest
+    }
+
     /// Takes pair `k` out of the running for this step.
     fn accept(&mut self, k: PairKey) {
         if let Some(Some(t)) = self.toi.get(&k) {
@@ -482,6 +501,36 @@ pub(crate) fn step_group<'s>(
         .filter(|&i| g.moving(i) && g.bodies[i].is_dynamic())
         .count();
     let mut book = PairBook::new(&g, &seg, &end, pairs, results);
+    // Each body's predicted spheres, grown as when the groups were formed:
+    // a realised piece inside them can meet only what this group holds.
+    let predicted: Vec<Option<Vec<SphereProxy>>> = book
+        .spheres
+        .iter()
+        .map(|s| {
+            s.as_ref().map(|(s, _, _)| {
+                s.iter()
+                    .map(|p| SphereProxy {
+                        radius: p.radius * (1.0 + GROUP_MARGIN),
+                        ..*p
+                    })
+                    .collect()
+            })
+        })
+        .collect();
+    let record = |g: &Region, pieces: &mut Vec<SphereProxy>, i: usize, from: &BodyState, to: &BodyState| {
+        let mut piece = Vec::new();
+        g.push_swept(&mut piece, g.ids[i], i, from, to);
+        let inside = predicted[i].as_ref().is_some_and(|grown| {
+            piece.len() == grown.len()
+                && piece
+                    .iter()
+                    .zip(grown)
+                    .all(|(p, q)| (p.center - q.center).norm() + p.radius <= q.radius)
+        });
+        if !inside {
+            pieces.extend(piece);
+        }
+    };
     // Which bodies have left their predicted path (rolled back or woken).
     let mut left = vec![false; n];
     let mut pieces: Vec<SphereProxy> = Vec::new();
@@ -494,10 +543,11 @@ pub(crate) fn step_group<'s>(
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
         // rolls back and is solved as at an impact. Not before the latest
-        // event, where that event's group starts its segments.
+        // event of the bodies its pairs reach, where their segments start
+        // (only those: what else the group holds must not move it).
         let due = spin_resolves
             .next()
-            .map(|(at, i)| (at.max(last_event.map_or(0.0, |(_, t)| t)), i))
+            .map(|(at, i)| (at.max(book.latest_start(&seg, i)), i))
             .filter(|&(at, _)| violation.is_none_or(|(_, t)| at < t));
         let spin_resolve = due.is_some();
         let Some((mut pair, mut tau)) = due.map(|(at, i)| ((i as u32, i as u32), at)).or(violation)
@@ -549,7 +599,7 @@ pub(crate) fn step_group<'s>(
         // prediction ends its piece there.
         for &(i, state) in &group_states {
             if left[i] {
-                g.push_swept(&mut pieces, g.ids[i], i, &seg[i].state, &state);
+                record(&g, &mut pieces, i, &seg[i].state, &state);
             }
             left[i] = true;
             seg[i].state = state;
@@ -603,7 +653,7 @@ pub(crate) fn step_group<'s>(
     }
     for i in 0..n {
         if left[i] {
-            g.push_swept(&mut pieces, g.ids[i], i, &seg[i].state, &end[i]);
+            record(&g, &mut pieces, i, &seg[i].state, &end[i]);
         }
     }
     g.counters.toi_events += events as u64;
@@ -650,7 +700,7 @@ fn find_leaks(
         return Vec::new();
     }
     // (a, b) with b a group's pieces, a a body or another group's pieces.
-    let pairs = broadphase::crossing_pairs(&start.proxies, &pieces);
+    let pairs = broadphase::crossing_pairs(&start.grown, &pieces);
     let mut leaks = Vec::new();
     for (a, b) in pairs {
         let p = b as usize - n;

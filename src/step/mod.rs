@@ -38,6 +38,7 @@ pub use stats::{Counters, NumericalFailure, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
 
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
+use crate::collision;
 use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
@@ -376,7 +377,13 @@ fn step_world(
         end,
         pairs,
         results,
-        proxies,
+        grown: proxies
+            .into_iter()
+            .map(|p| collision::broadphase::SphereProxy {
+                radius: p.radius * (1.0 + group::GROUP_MARGIN),
+                ..p
+            })
+            .collect(),
         since,
         separating,
         together: solved.together,
