@@ -45,7 +45,9 @@ use std::path::{Path, PathBuf};
 
 pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// Bump when `Checkpoint` changes shape; older files are then refused by name.
-pub const FORMAT: u32 = 6;
+/// 7: the counters of interaction groups (`groups`, `largest_group`,
+/// `group_reruns`).
+pub const FORMAT: u32 = 7;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";

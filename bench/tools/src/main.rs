@@ -5,7 +5,8 @@
 //! MANIFEST columns: `series,bodies,ranks,variant,rep,dir`, where series is
 //! `load_profile` (the 27 spheres), `rt10` (nuts and bolts, dt = 0.01 s, 10 Hz
 //! frames: the thesis's set-up), `rt60` (dt = frame = 1/60 s) or `hetero`
-//! (variant `even` / `slow`, with or without `_force`).
+//! (variant `even` / `slow`, with or without `_force`), or `pour` (the
+//! nuts-and-bolts pours of `scripts/bench_pour.sh`, variant = the commit).
 //!
 //! Summaries that are missing (a run that failed or was cut off by the
 //! script's time limit) are listed and left out.
@@ -94,6 +95,7 @@ fn main() {
     scaling(&runs, &out, &mut md);
     hetero(&runs, &out, &mut md);
     real_cores(&runs, &out, &mut md);
+    pours(&runs, &out, &mut md);
     if !missing.is_empty() {
         let _ = writeln!(
             md,
@@ -716,4 +718,113 @@ fn hetero(runs: &[Run], out: &Path, md: &mut String) {
     if let Err(e) = plot::draw(&out.join("hetero.png"), "Heterogeneous ranks", &[panel], 1) {
         eprintln!("report: {e}");
     }
+}
+
+/// The pours of `scripts/bench_pour.sh`: per body count and commit (the
+/// variant), medians over the reps of wall per simulated second, stage
+/// shares, impact events, queries per event and groups; `pours.md`,
+/// `pours.csv`, `pours.png`.
+fn pours(runs: &[Run], out: &Path, md: &mut String) {
+    let pour: Vec<&Run> = runs.iter().filter(|r| r.series == "pour").collect();
+    if pour.is_empty() {
+        return;
+    }
+    let mut keys: Vec<(u64, String)> = pour.iter().map(|r| (r.bodies, r.variant.clone())).collect();
+    keys.sort();
+    keys.dedup();
+    let mut variants: Vec<String> = keys.iter().map(|k| k.1.clone()).collect();
+    variants.dedup();
+    variants.sort();
+    variants.dedup();
+    let per_s = |r: &Run, v: f64| v / f(&r.s, &["sim_time_s"]);
+    let med = |rs: &[&Run], g: &dyn Fn(&Run) -> f64| median(&rs.iter().map(|r| g(r)).collect::<Vec<_>>());
+    let stage_names = ["time_of_impact", "solve_islands", "narrowphase", "broadphase", "integrate", "build_islands"];
+    let mut csv = String::from("bodies,commit,runs,simulated_s,ended,wall_s,wall_per_sim_s,outside_solve_per_sim_s,worst_frame_s,toi_events,queries_per_event,groups,largest_group,group_reruns,max_penetration_m,overlaps_accepted");
+    for n in stage_names {
+        let _ = write!(csv, ",{n}_share");
+    }
+    csv.push('\n');
+    md.push_str("## Pours (nuts and bolts onto the floor, one rank, `--no-render`)\n\n");
+    md.push_str("| bodies | commit | runs | simulated [s] | ended | wall per simulated s | outside solve_islands per simulated s | worst 0.1 s frame [s] | time of impact | solve_islands | narrowphase | broadphase | impact events | queries per event | groups | largest group | group re-runs | deepest overlap [µm] | accepted |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut rows: Vec<(u64, String, f64, f64)> = Vec::new();
+    for (bodies, variant) in &keys {
+        let rs: Vec<&Run> = pour.iter().copied().filter(|r| r.bodies == *bodies && &r.variant == variant).collect();
+        let wall = med(&rs, &|r| per_s(r, f(&r.s, &["wall_time_s"])));
+        let outside = med(&rs, &|r| per_s(r, f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"])));
+        let share = |k: &str| med(&rs, &|r| f(&r.s, &["stage_seconds", k]) / f(&r.s, &["wall_time_s"]));
+        let c = |k: &str| med(&rs, &|r| f(&r.s, &["counters", k]));
+        let qpe = med(&rs, &|r| f(&r.s, &["counters", "toi_bisection_queries"]) / f(&r.s, &["counters", "toi_events"]).max(1.0));
+        let sim = med(&rs, &|r| f(&r.s, &["sim_time_s"]));
+        let ended = rs.first().map_or(String::new(), |r| r.s["end_reason"].as_str().unwrap_or("").to_string());
+        let worst = med(&rs, &|r| f(&r.s, &["worst_frame_s"]));
+        let pen = med(&rs, &|r| f(&r.s, &["max_penetration_m"]));
+        let _ = writeln!(
+            md,
+            "| {bodies} | {variant} | {} | {sim:.2} | {ended} | {wall:.3} | {outside:.3} | {worst:.3} | {:.0} % | {:.0} % | {:.0} % | {:.0} % | {:.0} | {qpe:.1} | {:.0} | {:.0} | {:.0} | {:.3} | {:.0} |",
+            rs.len(),
+            100.0 * share("time_of_impact"),
+            100.0 * share("solve_islands"),
+            100.0 * share("narrowphase"),
+            100.0 * share("broadphase"),
+            c("toi_events"),
+            c("groups"),
+            c("largest_group"),
+            c("group_reruns"),
+            1e6 * pen,
+            c("overlaps_accepted"),
+        );
+        let _ = write!(
+            csv,
+            "{bodies},{variant},{},{sim},{ended},{},{wall},{outside},{worst},{},{qpe},{},{},{},{pen},{}",
+            rs.len(),
+            med(&rs, &|r| f(&r.s, &["wall_time_s"])),
+            c("toi_events"),
+            c("groups"),
+            c("largest_group"),
+            c("group_reruns"),
+            c("overlaps_accepted"),
+        );
+        for n in stage_names {
+            let _ = write!(csv, ",{}", share(n));
+        }
+        csv.push('\n');
+        rows.push((*bodies, variant.clone(), wall, qpe));
+    }
+    md.push('\n');
+    std::fs::write(out.join("pours.csv"), csv).expect("write pours.csv");
+    let series_of = |pick: &dyn Fn(&(u64, String, f64, f64)) -> f64| -> Vec<plot::Series> {
+        variants
+            .iter()
+            .map(|v| plot::Series {
+                label: v.clone(),
+                points: rows.iter().filter(|r| &r.1 == v).map(|r| (r.0 as f64, pick(r))).collect(),
+                thin: false,
+            })
+            .collect()
+    };
+    let panels = vec![
+        plot::Panel {
+            title: "wall seconds per simulated second".into(),
+            x_label: "bodies".into(),
+            y_label: "wall / simulated".into(),
+            x_log: true,
+            y_log: true,
+            series: series_of(&|r| r.2),
+            hlines: vec![(1.0, "real time".into())],
+            ..Default::default()
+        },
+        plot::Panel {
+            title: "time-of-impact queries per impact event".into(),
+            x_label: "bodies".into(),
+            y_label: "queries / event".into(),
+            x_log: true,
+            series: series_of(&|r| r.3),
+            ..Default::default()
+        },
+    ];
+    if let Err(e) = plot::draw(&out.join("pours.png"), "Pours of nuts and bolts, one rank", &panels, 2) {
+        eprintln!("report: {e}");
+    }
+    std::fs::write(out.join("pours.md"), md.split("## Pours").nth(1).map(|t| format!("## Pours{t}")).unwrap_or_default())
+        .expect("write pours.md");
 }

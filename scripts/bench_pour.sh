@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# The pour series: the bundled nuts and bolts (scenes/nuts_and_bolts.toml,
+# as scripts/stress.sh's `crowd` scenes) poured onto the 2 m floor, one rank,
+# --no-render: 50 bodies (±0.3 m, top 0.6 m) and 200 (±0.35 m, top 1.0 m)
+# to rest, 1000 (±0.55 m, top 1.6 m) for its first 1.5 s. Each count runs
+# with this checkout's build and with the build of BASE (a commit, default
+# be7269b, the last commit before interaction groups), interleaved, in one
+# sitting, so the ratios hold on a shared machine. bench/tools turns the
+# summaries into pours.md, pours.csv and pours.png under
+# bench/results/<machine>/ (BENCH_MACHINE, default <host>-<cores>cpu).
+#
+# Usage: scripts/bench_pour.sh [--tiny]      (or TINY=1)
+# Knobs: BASE=commit (BASE=none: this checkout only) COUNTS="50 200 1000"
+#        REPS=3 (50 and 200) REPS_BIG=1 (1000) BIG_DURATION=1.5
+#        KEEP_RUNS=1 keeps every run's folder.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source scripts/setup.sh
+
+tiny=${TINY:-0}
+[ "${1:-}" = "--tiny" ] && tiny=1
+machine=${BENCH_MACHINE:-$(hostname)-$(nproc)cpu}
+if [ "$tiny" = 1 ]; then
+  out=${OUT:-target/bench-tiny/$machine}
+  BASE=${BASE:-none}; COUNTS="5 20"; REPS=1; REPS_BIG=1; extra=(--duration 0.2)
+else
+  out=${OUT:-bench/results/$machine}
+  BASE=${BASE:-be7269b}; COUNTS=${COUNTS:-"50 200 1000"}
+  REPS=${REPS:-3}; REPS_BIG=${REPS_BIG:-1}; extra=()
+fi
+BIG_DURATION=${BIG_DURATION:-1.5}
+
+cargo build --release --quiet
+cargo build --release --quiet --manifest-path bench/tools/Cargo.toml --target-dir "${CARGO_TARGET_DIR:-target}"
+mkdir -p "$out"
+tmp=$(mktemp -d)
+if [ "${KEEP_RUNS:-0}" = 1 ]; then echo "bench_pour: runs kept in $tmp"; else trap 'rm -rf "$tmp"' EXIT; fi
+here=$(git rev-parse --short HEAD 2>/dev/null || echo here)
+[ -n "$(git status --porcelain --untracked-files=no 2>/dev/null)" ] && here="$here+"
+# Private copies: a rebuild of target/ during the runs must not mix versions.
+declare -A bin
+bin[$here]=$tmp/rigidsim-$here
+cp "${CARGO_TARGET_DIR:-target}"/release/rigidsim "${bin[$here]}"
+labels=("$here")
+if [ "$BASE" != none ]; then
+  base=$(git rev-parse --short "$BASE")
+  tree=target/bench-base/$base
+  if [ ! -x "$tree/target/release/rigidsim" ]; then
+    rm -rf "$tree"
+    git worktree prune
+    git worktree add --detach "$tree" "$base" >/dev/null
+    (cd "$tree" && cargo build --release --quiet)
+  fi
+  bin[$base]=$tmp/rigidsim-$base
+  cp "$tree/target/release/rigidsim" "${bin[$base]}"
+  labels=("$base" "$here")
+fi
+
+# crowd COUNT HALF_WIDTH TOP: the bundled scene with its scatter box changed.
+crowd() {
+  sed -e "s/^count = 20/count = $1/" -e "s/^min = .*/min = [-$2, -$2, 0.1]/" \
+      -e "s/^max = .*/max = [$2, $2, $3]/" -e "s/^max_duration = .*/max_duration = 60.0/" \
+      -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml
+}
+manifest=$tmp/manifest.csv
+echo "series,bodies,ranks,variant,rep,dir" >"$manifest"
+for count in $COUNTS; do
+  case $count in
+    50) crowd 50 0.3 0.6 ;; 200) crowd 200 0.35 1.0 ;; 1000) crowd 1000 0.55 1.6 ;;
+    *) crowd "$count" 0.3 0.6 ;;
+  esac >"$tmp/crowd$count.toml"
+  reps=$REPS; opts=("${extra[@]}")
+  if [ "$count" -ge 1000 ]; then reps=$REPS_BIG; opts=(--duration "$BIG_DURATION"); fi
+  for rep in $(seq 1 "$reps"); do
+    for label in "${labels[@]}"; do
+      dir=$tmp/pour-$count-$label-$rep
+      echo "bench_pour: $count bodies, $label, rep $rep"
+      OMPI_MCA_rmaps_base_oversubscribe=1 "${bin[$label]}" "$tmp/crowd$count.toml" --no-render --no-progress \
+        --sample-every 0.5 "${opts[@]}" --out "$dir" >/dev/null 2>&1 || echo "bench_pour: run failed ($count, $label)"
+      echo "pour,$count,1,$label,$rep,$dir" >>"$manifest"
+    done
+  done
+done
+"${CARGO_TARGET_DIR:-target}"/release/rigidsim-bench-report "$manifest" "$tmp/report" 2>/dev/null
+cp "$tmp/report"/pours.* "$out"/
+echo "bench_pour: results in $out/pours.md (commits ${labels[*]})"
+cat "$out/pours.md"
