@@ -1,7 +1,7 @@
 //! `summary.json`: what a run did, how long it took and how it ended.
 
-pub use crate::step::stats::{Distribution, RankSummary};
 use crate::step::stats::{Counters, StageSeconds};
+pub use crate::step::stats::{Distribution, RankSummary};
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -37,4 +37,3 @@ pub struct Summary {
     pub render_adapter: Option<String>,
     pub notes: Vec<String>,
 }
-

@@ -158,8 +158,7 @@ impl Region<'_> {
             let i = b.index();
             self.bodies[i].is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok()
         });
-        let restitution_threshold =
-            0.5 * self.st.settings.gravity.norm() * self.st.settings.dt;
+        let restitution_threshold = 0.5 * self.st.settings.gravity.norm() * self.st.settings.dt;
         let mut tasks = Vec::with_capacity(islands.len());
         // Per island, each contact's pair and point in A's body frame.
         let mut contact_pairs: Vec<Vec<ContactWhere>> = Vec::with_capacity(islands.len());

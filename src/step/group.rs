@@ -121,7 +121,11 @@ pub(crate) fn plan_groups(world: &Region, start: &StepStart) -> Vec<GroupPlan> {
     }
     let mut by_root: BTreeMap<u32, GroupPlan> = BTreeMap::new();
     for (k, &(a, b)) in start.pairs.iter().enumerate() {
-        let root = if dynamic(a) { sets.find(a) } else { sets.find(b) };
+        let root = if dynamic(a) {
+            sets.find(a)
+        } else {
+            sets.find(b)
+        };
         let plan = by_root.entry(root).or_default();
         plan.pairs.push(k);
         for x in [a, b] {
@@ -204,10 +208,18 @@ pub(crate) fn group_input<'s>(
     index: &StartIndex,
     plan: &GroupPlan,
 ) -> (Region<'s>, GroupState) {
-    let mut ids: Vec<u32> = plan.members.iter().chain(&plan.neighbours).copied().collect();
+    let mut ids: Vec<u32> = plan
+        .members
+        .iter()
+        .chain(&plan.neighbours)
+        .copied()
+        .collect();
     ids.sort_unstable();
     ids.dedup();
-    let local = |w: u32| ids.binary_search(&w).expect("a group's pair has both bodies in it") as u32;
+    let local = |w: u32| {
+        ids.binary_search(&w)
+            .expect("a group's pair has both bodies in it") as u32
+    };
     let key = |(a, b): PairKey| (local(a), local(b));
     let body_key = |(a, b): (BodyId, BodyId)| (BodyId(local(a.0)), BodyId(local(b.0)));
     let features = index
@@ -271,7 +283,11 @@ pub(crate) fn group_input<'s>(
         seg: ids.iter().map(|&w| start.seg[w as usize]).collect(),
         end: ids.iter().map(|&w| start.end[w as usize]).collect(),
         pairs: plan.pairs.iter().map(|&k| key(start.pairs[k])).collect(),
-        results: plan.pairs.iter().map(|&k| start.results[k].clone()).collect(),
+        results: plan
+            .pairs
+            .iter()
+            .map(|&k| start.results[k].clone())
+            .collect(),
         since,
         separating,
         together,
@@ -310,6 +326,9 @@ impl Ord for ImpactTime {
     }
 }
 
+/// A body's swept spheres and the box around them (min, max corners).
+type Swept = (Vec<SphereProxy>, Vector3<f64>, Vector3<f64>);
+
 /// The group's candidate pairs, kept so that an event costs what the bodies
 /// it moved cost: each pair's latest result and time of impact, each body's
 /// partners, its swept spheres, and a queue of impacts ordered by (time,
@@ -324,11 +343,17 @@ struct PairBook {
     /// Pairs whose time of impact is still to be found.
     dirty: BTreeSet<PairKey>,
     /// Each body's swept spheres and the box around them (`None`: fallen).
-    spheres: Vec<Option<(Vec<SphereProxy>, Vector3<f64>, Vector3<f64>)>>,
+    spheres: Vec<Option<Swept>>,
 }
 
 impl PairBook {
-    fn new(g: &Region, seg: &[Segment], end: &[BodyState], pairs: Vec<PairKey>, results: Vec<PairResult>) -> Self {
+    fn new(
+        g: &Region,
+        seg: &[Segment],
+        end: &[BodyState],
+        pairs: Vec<PairKey>,
+        results: Vec<PairResult>,
+    ) -> Self {
         let n = g.bodies.len();
         let mut book = PairBook {
             results: BTreeMap::new(),
@@ -383,8 +408,14 @@ impl PairBook {
         let mut s = Vec::new();
         g.push_swept(&mut s, i as u32, i, &seg[i].state, &end[i]);
         let r = |p: &SphereProxy| Vector3::repeat(p.radius);
-        let lo = s.iter().map(|p| p.center - r(p)).fold(Vector3::repeat(f64::INFINITY), |m, x| m.inf(&x));
-        let hi = s.iter().map(|p| p.center + r(p)).fold(Vector3::repeat(f64::NEG_INFINITY), |m, x| m.sup(&x));
+        let lo = s
+            .iter()
+            .map(|p| p.center - r(p))
+            .fold(Vector3::repeat(f64::INFINITY), |m, x| m.inf(&x));
+        let hi = s
+            .iter()
+            .map(|p| p.center + r(p))
+            .fold(Vector3::repeat(f64::NEG_INFINITY), |m, x| m.sup(&x));
         self.spheres[i] = Some((s, lo, hi));
     }
 
@@ -517,20 +548,21 @@ pub(crate) fn step_group<'s>(
             })
         })
         .collect();
-    let record = |g: &Region, pieces: &mut Vec<SphereProxy>, i: usize, from: &BodyState, to: &BodyState| {
-        let mut piece = Vec::new();
-        g.push_swept(&mut piece, g.ids[i], i, from, to);
-        let inside = predicted[i].as_ref().is_some_and(|grown| {
-            piece.len() == grown.len()
-                && piece
-                    .iter()
-                    .zip(grown)
-                    .all(|(p, q)| (p.center - q.center).norm() + p.radius <= q.radius)
-        });
-        if !inside {
-            pieces.extend(piece);
-        }
-    };
+    let record =
+        |g: &Region, pieces: &mut Vec<SphereProxy>, i: usize, from: &BodyState, to: &BodyState| {
+            let mut piece = Vec::new();
+            g.push_swept(&mut piece, g.ids[i], i, from, to);
+            let inside = predicted[i].as_ref().is_some_and(|grown| {
+                piece.len() == grown.len()
+                    && piece
+                        .iter()
+                        .zip(grown)
+                        .all(|(p, q)| (p.center - q.center).norm() + p.radius <= q.radius)
+            });
+            if !inside {
+                pieces.extend(piece);
+            }
+        };
     // Which bodies have left their predicted path (rolled back or woken).
     let mut left = vec![false; n];
     let mut pieces: Vec<SphereProxy> = Vec::new();
@@ -731,7 +763,15 @@ pub(crate) fn step_groups<'s>(
         features: PairIndex::new(n, world.features.keys()),
         since: PairIndex::new(n, start.since.keys()),
         separating: PairIndex::new(n, start.separating.keys()),
-        warm: PairIndex::new(n, world.warm.keys().map(|(a, b)| (a.0, b.0)).collect::<Vec<_>>().iter()),
+        warm: PairIndex::new(
+            n,
+            world
+                .warm
+                .keys()
+                .map(|(a, b)| (a.0, b.0))
+                .collect::<Vec<_>>()
+                .iter(),
+        ),
     };
     let mut plans = plan_groups(world, start);
     let mut runs: Vec<Option<GroupRun<'s>>> = (0..plans.len()).map(|_| None).collect();
@@ -822,7 +862,12 @@ pub(crate) fn step_groups<'s>(
             runs.push(run);
         }
     }
-    Ok((runs.into_iter().map(|r| r.expect("every group ran")).collect(), reruns))
+    Ok((
+        runs.into_iter()
+            .map(|r| r.expect("every group ran"))
+            .collect(),
+        reruns,
+    ))
 }
 
 /// World ids of a group's touching contacts, impacts and warm starts.

@@ -25,6 +25,7 @@
 //! outcome never depends on which rank did what.
 
 mod contact;
+mod frame;
 mod group;
 mod region;
 mod sleep;
@@ -38,17 +39,14 @@ pub use stats::{Counters, NumericalFailure, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
 
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
-use crate::collision;
 use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
-use group::StepStart;
 use nalgebra::{Point3, Vector3};
-use region::{Region, Segment, StepStatic};
+use region::{Region, StepStatic};
 use stats::{Distribution, RankSummary};
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
-use toi::{Since, SolvedSince};
 
 /// Runs the distributable stages. One rank: `Inline`; several: `cluster`.
 pub trait Executor {
@@ -243,7 +241,7 @@ impl World {
             pair_forces: BTreeMap::new(),
         };
         let first = self.steps == 0;
-        let result = step_world(
+        let result = frame::step_world(
             &mut world,
             &mut self.touching,
             first,
@@ -294,186 +292,6 @@ impl World {
         (self.bodies[body].pose() * Point3::from(local)).coords
     }
 }
-/// One step of the whole world (`World::step`), in SPEC 2.1's stages.
-fn step_world(
-    w: &mut Region,
-    touching: &mut Vec<Touching>,
-    first: bool,
-    exec: &mut dyn Executor,
-    max_penetration: &mut f64,
-    steps: &mut u64,
-) -> Result<(), NumericalFailure> {
-    let h = w.st.settings.dt;
-    let t0 = w.st.t0;
-    let n = w.bodies.len();
-    w.wake_for_forces(t0, h);
-
-    // External forces at the start of the step (constant over it).
-    let mut seg: Vec<Segment> = (0..n)
-        .map(|i| {
-            let (force, torque) = if w.bodies[i].is_dynamic() && w.moving(i) {
-                w.external(i, t0)
-            } else {
-                (Vector3::zeros(), Vector3::zeros())
-            };
-            Segment {
-                state: w.bodies[i].state,
-                time: 0.0,
-                force,
-                torque,
-            }
-        })
-        .collect();
-
-    // Contacts touching at the very start (bodies placed in contact).
-    if first && touching.is_empty() {
-        let now: Vec<BodyState> = seg.iter().map(|s| s.state).collect();
-        let (pairs, _) = w.broadphase(&seg, &now);
-        let results = w.narrowphase_at(exec, &pairs, &now);
-        *touching = w.touching_from(&pairs, &results);
-    }
-
-    // build_islands + solve_islands on the contacts touching now.
-    let start_touching = std::mem::take(touching);
-    let since: SolvedSince = start_touching
-        .iter()
-        .map(|t| {
-            let deepest = t.points.iter().map(|p| -p.separation).fold(0.0, f64::max);
-            ((t.a.0, t.b.0), Since { time: 0.0, deepest })
-        })
-        .collect();
-    let all_moving: Vec<usize> = (0..n).filter(|&i| w.moving(i)).collect();
-    let solved = w.contact_phase(exec, &start_touching, &all_moving, &mut seg, h);
-    let mut spin_resolves = contact::SpinResolves::default();
-    spin_resolves.schedule(&solved, &all_moving, 0.0, h);
-    check_states(seg.iter().map(|s| &s.state).enumerate(), "solve_islands", t0)?;
-    // Pairs touching now or hit during the last step ("colliding in the
-    // previous frame") that now separate.
-    let previous_impacts = std::mem::take(&mut w.impacts);
-    let mut separating = w.separating_pairs(&previous_impacts, &seg);
-    separating.extend(w.separating_pairs(&start_touching, &seg));
-
-    // integrate
-    let clock = Instant::now();
-    let mut end: Vec<BodyState> = seg.iter().map(|s| s.state).collect();
-    for &i in &all_moving {
-        end[i] = w.integrate_segment(i, &seg[i], h);
-    }
-    w.counters.integrations += all_moving.len() as u64;
-    w.counters.integrations_skipped_resting += (0..n)
-        .filter(|&i| w.bodies[i].activity == Activity::Sleeping)
-        .count() as u64;
-    w.stage.integrate += clock.elapsed().as_secs_f64();
-
-    // broadphase + narrowphase at the end of the step.
-    let (pairs, proxies) = w.broadphase(&seg, &end);
-    let results = w.narrowphase_skipping_separating(exec, &pairs, &end, &separating);
-
-    // build_groups + time_of_impact, group by group. Its stage time is the
-    // groups' wall time less the stages they call (counted under theirs).
-    let clock = Instant::now();
-    let start = StepStart {
-        seg,
-        end,
-        pairs,
-        results,
-        grown: proxies
-            .into_iter()
-            .map(|p| collision::broadphase::SphereProxy {
-                radius: p.radius * (1.0 + group::GROUP_MARGIN),
-                ..p
-            })
-            .collect(),
-        since,
-        separating,
-        together: solved.together,
-        spin_resolves,
-        touching: start_touching.iter().map(|t| (t.a.0, t.b.0)).collect(),
-    };
-    let (runs, reruns) = group::step_groups(w.st, w, &start, exec)?;
-    let mut end = start.end;
-    let mut all: Vec<((u32, u32), PairResult)> = start
-        .pairs
-        .iter()
-        .copied()
-        .zip(start.results)
-        .filter(|&((a, b), _)| {
-            // Pairs of no group: none today (every tested pair has a
-            // dynamic body, and so a group); kept for safety.
-            !w.bodies[a as usize].is_dynamic() && !w.bodies[b as usize].is_dynamic()
-        })
-        .collect();
-    let mut events = 0u64;
-    let mut nested = 0.0;
-    w.counters.groups += runs.len() as u64;
-    w.counters.group_reruns += reruns;
-    for run in runs {
-        let g = run.region;
-        let ids = &g.ids;
-        let mut size = 0u64;
-        for (i, &id) in ids.iter().enumerate() {
-            if !g.bodies[i].is_dynamic() {
-                continue;
-            }
-            let wi = id as usize;
-            size += u64::from(g.bodies[i].activity == Activity::Awake);
-            w.bodies[wi].activity = g.bodies[i].activity;
-            w.sleep_timer[wi] = g.sleep_timer[i];
-            end[wi] = run.end[i];
-        }
-        w.counters.largest_group = w.counters.largest_group.max(size);
-        let world_key = |(a, b): (u32, u32)| (ids[a as usize], ids[b as usize]);
-        all.extend(run.pairs.iter().map(|&k| world_key(k)).zip(run.results));
-        w.warm.extend(g.warm.into_iter().map(|e| group::to_world_warm(ids, e)));
-        w.impacts
-            .extend(g.impacts.into_iter().map(|t| group::to_world_touching(ids, t)));
-        w.pair_forces.extend(g.pair_forces.into_iter().map(|((a, b), f)| {
-            ((BodyId(ids[a.index()]), BodyId(ids[b.index()])), f)
-        }));
-        w.counters.add(&g.counters);
-        nested += g.stage.nested();
-        w.stage.broadphase += g.stage.broadphase;
-        w.stage.narrowphase += g.stage.narrowphase;
-        w.stage.build_islands += g.stage.build_islands;
-        w.stage.solve_islands += g.stage.solve_islands;
-        w.stage.integrate += g.stage.integrate;
-        events += run.events;
-    }
-    w.counters.max_events_in_step = w.counters.max_events_in_step.max(events);
-    if events > 0 {
-        w.counters.steps_with_events += 1;
-    }
-    w.stage.time_of_impact += clock.elapsed().as_secs_f64() - nested;
-
-    // Commit the end states.
-    for i in 0..n {
-        if w.bodies[i].activity == Activity::Awake {
-            w.bodies[i].state = end[i];
-        }
-    }
-    all.sort_unstable_by_key(|(k, _)| *k);
-    for (k, r) in &all {
-        *max_penetration = max_penetration.max(r.depth);
-        if !r.features.is_empty() {
-            w.features.insert(*k, r.features.clone());
-        }
-    }
-    let (keys, results): (Vec<(u32, u32)>, Vec<PairResult>) = all.into_iter().unzip();
-    *touching = w.touching_from(&keys, &results);
-    let touching_pairs: BTreeSet<(BodyId, BodyId)> = touching.iter().map(|t| (t.a, t.b)).collect();
-    w.warm.retain(|k, _| touching_pairs.contains(k));
-    *steps += 1;
-    w.counters.steps += 1;
-    check_states(
-        w.bodies.iter().map(|b| &b.state).enumerate(),
-        "integrate",
-        t0 + h,
-    )?;
-    w.wake_touched_at_end(touching);
-    w.update_rest_and_falls(touching, h);
-    Ok(())
-}
-
 /// Stops the run when a state is non-finite or faster than 10⁶ m/s,
 /// naming the stage that produced it: `solve_islands` right after a
 /// contact solve (impulses), `integrate` at the end of the step (forces,

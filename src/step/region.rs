@@ -7,9 +7,9 @@
 //! every tie-break on local pair keys orders pairs exactly as on world ids,
 //! and a group's result never depends on which other bodies the world holds.
 
+use super::Executor;
 use super::contact::{Touching, WarmContact};
 use super::stats::{Counters, StageSeconds};
-use super::Executor;
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::broadphase::{self, SphereProxy};
 use crate::collision::narrowphase::{
@@ -102,7 +102,14 @@ impl<'s> Region<'s> {
     }
 
     pub fn integrate_segment(&self, i: usize, s: &Segment, h: f64) -> BodyState {
-        integrate(&s.state, self.object(i), self.bodies[i].kind, &s.force, &s.torque, h)
+        integrate(
+            &s.state,
+            self.object(i),
+            self.bodies[i].kind,
+            &s.force,
+            &s.torque,
+            h,
+        )
     }
 
     /// Body `i` as it is in `state` (a segment's, or one integrated along it).

@@ -5,8 +5,8 @@
 //! `counters`.
 
 use super::Executor;
-use super::region::{PairKey, Region, Segment, pose};
 use super::contact::SolvedTogether;
+use super::region::{PairKey, Region, Segment, pose};
 use crate::body::{BodyKind, BodyState};
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::{self, CONTACT_TOLERANCE, PairResult, PairTask};
@@ -45,6 +45,9 @@ pub(crate) struct Since {
     pub time: f64,
     pub deepest: f64,
 }
+
+/// An instant at which a pair was found apart, and V-Clip's distance then.
+type Apart = (f64, f64);
 
 /// What sampling a pair's path found (`Region::first_overlap_sample`).
 enum Sampled {
@@ -362,7 +365,13 @@ impl Region<'_> {
     /// interval between `ends` (`closing_time`'s `turn`): from Euler's
     /// equations, ω̇ = I⁻¹(τ − ω × L) in the world frame, so
     /// |ω̇| ≤ (|τ| + |ω|·|L|) / I_min with the interval's bounds on |ω| and |L|.
-    fn turn_bound(&self, seg: &[Segment], i: usize, ends: &[BodyState; 2], span: f64) -> (f64, f64) {
+    fn turn_bound(
+        &self,
+        seg: &[Segment],
+        i: usize,
+        ends: &[BodyState; 2],
+        span: f64,
+    ) -> (f64, f64) {
         let o = self.object(i);
         let reach = o.outer_radius();
         match self.bodies[i].kind {
@@ -519,7 +528,7 @@ impl Region<'_> {
         lo: f64,
         hi: f64,
         since: Option<Since>,
-        (lo_gap, before): (Option<(f64, f64)>, Option<(f64, f64)>),
+        (lo_gap, before): (Option<(f64, f64)>, Option<Apart>),
     ) -> f64 {
         // Forces are constant over a segment, so speeds peak at its ends.
         let speed = self

@@ -1,0 +1,284 @@
+//! One step of the whole world, as SPEC 2.1's frame loop: each stage a
+//! function of its own, in the order the step takes them.
+
+use super::contact::{SpinResolves, Touching};
+use super::group::{self, GROUP_MARGIN, GroupRun, StepStart};
+use super::region::{PairKey, Region, Segment};
+use super::stats::NumericalFailure;
+use super::toi::{Since, SolvedSince};
+use super::{Executor, check_states};
+use crate::body::{Activity, BodyId, BodyState};
+use crate::collision::broadphase::SphereProxy;
+use crate::collision::narrowphase::PairResult;
+use nalgebra::Vector3;
+use std::collections::{BTreeSet, HashMap};
+use std::time::Instant;
+
+/// One step of the whole world (`World::step`).
+pub(super) fn step_world(
+    w: &mut Region,
+    touching: &mut Vec<Touching>,
+    first: bool,
+    exec: &mut dyn Executor,
+    max_penetration: &mut f64,
+    steps: &mut u64,
+) -> Result<(), NumericalFailure> {
+    let (h, t0) = (w.st.settings.dt, w.st.t0);
+    w.wake_for_forces(t0, h);
+    if first && touching.is_empty() {
+        *touching = touching_at_start(w, exec);
+    }
+    // build_islands + solve_islands: impacts and resting forces of the
+    // contacts touching now, for every moving body.
+    let start_touching = std::mem::take(touching);
+    let solved = solve_touching(w, exec, &start_touching)?;
+    // integrate: every awake body along its segment to the step's end.
+    let end = integrate(w, &solved.seg);
+    // broadphase + narrowphase at the end of the step.
+    let (pairs, proxies) = w.broadphase(&solved.seg, &end);
+    let results = w.narrowphase_skipping_separating(exec, &pairs, &end, &solved.separating);
+    // build_groups + time_of_impact, group by group. Its stage time is the
+    // groups' wall time less the stages they call (counted under theirs).
+    let clock = Instant::now();
+    let start = StepStart {
+        seg: solved.seg,
+        end,
+        pairs,
+        results,
+        grown: grow(proxies),
+        since: solved.since,
+        separating: solved.separating,
+        together: solved.together,
+        spin_resolves: solved.spin_resolves,
+        touching: start_touching.iter().map(|t| (t.a.0, t.b.0)).collect(),
+    };
+    let (runs, reruns) = group::step_groups(w.st, w, &start, exec)?;
+    let merged = merge_groups(w, runs, reruns);
+    w.stage.time_of_impact += clock.elapsed().as_secs_f64() - merged.nested;
+    // Commit the end states, the contacts touching now and the caches.
+    *touching = commit(w, start.end, merged, max_penetration);
+    *steps += 1;
+    w.counters.steps += 1;
+    check_states(
+        w.bodies.iter().map(|b| &b.state).enumerate(),
+        "integrate",
+        t0 + h,
+    )?;
+    // Resting systems: wake the touched ones, rest and fall the others.
+    w.wake_touched_at_end(touching);
+    w.update_rest_and_falls(touching, h);
+    Ok(())
+}
+
+/// Contacts touching at the very start (bodies placed in contact).
+fn touching_at_start(w: &mut Region, exec: &mut dyn Executor) -> Vec<Touching> {
+    let seg = segments(w);
+    let now: Vec<BodyState> = seg.iter().map(|s| s.state).collect();
+    let (pairs, _) = w.broadphase(&seg, &now);
+    let results = w.narrowphase_at(exec, &pairs, &now);
+    w.touching_from(&pairs, &results)
+}
+
+/// Each body's segment from its state at the step's start, with the
+/// external forces then (constant over the step).
+fn segments(w: &Region) -> Vec<Segment> {
+    (0..w.bodies.len())
+        .map(|i| {
+            let (force, torque) = if w.bodies[i].is_dynamic() && w.moving(i) {
+                w.external(i, w.st.t0)
+            } else {
+                (Vector3::zeros(), Vector3::zeros())
+            };
+            Segment {
+                state: w.bodies[i].state,
+                time: 0.0,
+                force,
+                torque,
+            }
+        })
+        .collect()
+}
+
+/// What the step's contact solve leaves for the rest of the step.
+struct SolvedStart {
+    seg: Vec<Segment>,
+    since: SolvedSince,
+    separating: HashMap<PairKey, Vector3<f64>>,
+    together: Vec<Vec<usize>>,
+    spin_resolves: SpinResolves,
+}
+
+/// The contact solve of the islands touching at the step's start.
+fn solve_touching(
+    w: &mut Region,
+    exec: &mut dyn Executor,
+    touching: &[Touching],
+) -> Result<SolvedStart, NumericalFailure> {
+    let h = w.st.settings.dt;
+    let mut seg = segments(w);
+    let since: SolvedSince = touching
+        .iter()
+        .map(|t| {
+            let deepest = t.points.iter().map(|p| -p.separation).fold(0.0, f64::max);
+            ((t.a.0, t.b.0), Since { time: 0.0, deepest })
+        })
+        .collect();
+    let all_moving: Vec<usize> = (0..w.bodies.len()).filter(|&i| w.moving(i)).collect();
+    let solved = w.contact_phase(exec, touching, &all_moving, &mut seg, h);
+    let mut spin_resolves = SpinResolves::default();
+    spin_resolves.schedule(&solved, &all_moving, 0.0, h);
+    check_states(
+        seg.iter().map(|s| &s.state).enumerate(),
+        "solve_islands",
+        w.st.t0,
+    )?;
+    // Pairs touching now or hit during the last step ("colliding in the
+    // previous frame") that now separate.
+    let previous_impacts = std::mem::take(&mut w.impacts);
+    let mut separating = w.separating_pairs(&previous_impacts, &seg);
+    separating.extend(w.separating_pairs(touching, &seg));
+    Ok(SolvedStart {
+        seg,
+        since,
+        separating,
+        together: solved.together,
+        spin_resolves,
+    })
+}
+
+/// Every awake body to the end of the step along its segment.
+fn integrate(w: &mut Region, seg: &[Segment]) -> Vec<BodyState> {
+    let clock = Instant::now();
+    let h = w.st.settings.dt;
+    let mut end: Vec<BodyState> = seg.iter().map(|s| s.state).collect();
+    let mut moving = 0u64;
+    for i in 0..w.bodies.len() {
+        if w.moving(i) {
+            end[i] = w.integrate_segment(i, &seg[i], h);
+            moving += 1;
+        }
+    }
+    w.counters.integrations += moving;
+    w.counters.integrations_skipped_resting += w
+        .bodies
+        .iter()
+        .filter(|b| b.activity == Activity::Sleeping)
+        .count() as u64;
+    w.stage.integrate += clock.elapsed().as_secs_f64();
+    end
+}
+
+/// The predicted spheres grown by `GROUP_MARGIN`, as the groups are formed.
+fn grow(proxies: Vec<SphereProxy>) -> Vec<SphereProxy> {
+    proxies
+        .into_iter()
+        .map(|p| SphereProxy {
+            radius: p.radius * (1.0 + GROUP_MARGIN),
+            ..p
+        })
+        .collect()
+}
+
+/// What the groups leave for `commit`, in world ids.
+struct Merged {
+    /// End state of each of the groups' dynamic bodies.
+    ends: Vec<(usize, BodyState)>,
+    /// Every group's pairs with their final results.
+    pairs: Vec<(PairKey, PairResult)>,
+    /// Stage seconds the groups spent in nested stages.
+    nested: f64,
+}
+
+/// Takes each group's results into the world, in group-id order: its
+/// bodies' activity, warm starts, impacts, forces, counters and stage
+/// times now; its end states and pairs for `commit`.
+fn merge_groups(w: &mut Region, runs: Vec<GroupRun>, reruns: u64) -> Merged {
+    let mut merged = Merged {
+        ends: Vec::new(),
+        pairs: Vec::new(),
+        nested: 0.0,
+    };
+    let mut events = 0u64;
+    w.counters.groups += runs.len() as u64;
+    w.counters.group_reruns += reruns;
+    for run in runs {
+        let g = run.region;
+        let ids = &g.ids;
+        let mut size = 0u64;
+        for (i, &id) in ids.iter().enumerate() {
+            if !g.bodies[i].is_dynamic() {
+                continue;
+            }
+            let wi = id as usize;
+            size += u64::from(g.bodies[i].activity == Activity::Awake);
+            w.bodies[wi].activity = g.bodies[i].activity;
+            w.sleep_timer[wi] = g.sleep_timer[i];
+            merged.ends.push((wi, run.end[i]));
+        }
+        w.counters.largest_group = w.counters.largest_group.max(size);
+        let world_key = |(a, b): PairKey| (ids[a as usize], ids[b as usize]);
+        merged
+            .pairs
+            .extend(run.pairs.iter().map(|&k| world_key(k)).zip(run.results));
+        w.warm
+            .extend(g.warm.into_iter().map(|e| group::to_world_warm(ids, e)));
+        w.impacts.extend(
+            g.impacts
+                .into_iter()
+                .map(|t| group::to_world_touching(ids, t)),
+        );
+        w.pair_forces.extend(
+            g.pair_forces
+                .into_iter()
+                .map(|((a, b), f)| ((BodyId(ids[a.index()]), BodyId(ids[b.index()])), f)),
+        );
+        w.counters.add(&g.counters);
+        merged.nested += g.stage.nested();
+        w.stage.broadphase += g.stage.broadphase;
+        w.stage.narrowphase += g.stage.narrowphase;
+        w.stage.build_islands += g.stage.build_islands;
+        w.stage.solve_islands += g.stage.solve_islands;
+        w.stage.integrate += g.stage.integrate;
+        events += run.events;
+    }
+    w.counters.max_events_in_step = w.counters.max_events_in_step.max(events);
+    if events > 0 {
+        w.counters.steps_with_events += 1;
+    }
+    merged
+}
+
+/// The step's end: every awake body takes its end state (a group's, or
+/// its prediction when it was in none), and the pairs' final results give
+/// the deepest overlap, V-Clip's feature caches and the contacts touching
+/// now, which are returned.
+fn commit(
+    w: &mut Region,
+    mut end: Vec<BodyState>,
+    merged: Merged,
+    max_penetration: &mut f64,
+) -> Vec<Touching> {
+    for (i, state) in merged.ends {
+        end[i] = state;
+    }
+    for (b, e) in w.bodies.iter_mut().zip(&end) {
+        if b.activity == Activity::Awake {
+            b.state = *e;
+        }
+    }
+    // Every tested pair has a dynamic body, and so a group: the groups'
+    // pairs are all of them.
+    let mut all = merged.pairs;
+    all.sort_unstable_by_key(|(k, _)| *k);
+    for (k, r) in &all {
+        *max_penetration = max_penetration.max(r.depth);
+        if !r.features.is_empty() {
+            w.features.insert(*k, r.features.clone());
+        }
+    }
+    let (keys, results): (Vec<PairKey>, Vec<PairResult>) = all.into_iter().unzip();
+    let touching = w.touching_from(&keys, &results);
+    let touching_pairs: BTreeSet<(BodyId, BodyId)> = touching.iter().map(|t| (t.a, t.b)).collect();
+    w.warm.retain(|k, _| touching_pairs.contains(k));
+    touching
+}
