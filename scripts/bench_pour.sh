@@ -2,7 +2,8 @@
 # The pour series: the bundled nuts and bolts (scenes/nuts_and_bolts.toml,
 # as scripts/stress.sh's `crowd` scenes) poured onto the 2 m floor, one rank,
 # --no-render: 50 bodies (±0.3 m, top 0.6 m) and 200 (±0.35 m, top 1.0 m)
-# to rest, 1000 (±0.55 m, top 1.6 m) for its first 1.5 s. Each count runs
+# to rest, 1000 (±0.55 m, top 1.6 m) for its first 1.5 s, beside 200 for
+# the same 1.5 s (the growth ratio outside solve_islands). Each count runs
 # with this checkout's build and with the build of BASE (a commit, default
 # be7269b, the last commit before interaction groups), interleaved, in one
 # sitting, so the ratios hold on a shared machine. bench/tools turns the
@@ -75,9 +76,16 @@ for count in $COUNTS; do
     for label in "${labels[@]}"; do
       dir=$tmp/pour-$count-$label-$rep
       echo "bench_pour: $count bodies, $label, rep $rep"
-      OMPI_MCA_rmaps_base_oversubscribe=1 "${bin[$label]}" "$tmp/crowd$count.toml" --no-render --no-progress \
+      "${bin[$label]}" "$tmp/crowd$count.toml" --no-render --no-progress \
         --sample-every 0.5 "${opts[@]}" --out "$dir" >/dev/null 2>&1 || echo "bench_pour: run failed ($count, $label)"
       echo "pour,$count,1,$label,$rep,$dir" >>"$manifest"
+      if [ "$count" -ge 1000 ]; then
+        # 200 bodies over the same window, for the growth ratio.
+        [ -f "$tmp/crowd200w.toml" ] || crowd 200 0.35 1.0 >"$tmp/crowd200w.toml"
+        "${bin[$label]}" "$tmp/crowd200w.toml" --no-render --no-progress --sample-every 0.5 \
+          "${opts[@]}" --out "$dir-window" >/dev/null 2>&1 || echo "bench_pour: run failed (200 window, $label)"
+        echo "pour_window,200,1,$label,$rep,$dir-window" >>"$manifest"
+      fi
     done
   done
 done

@@ -729,6 +729,8 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
     if pour.is_empty() {
         return;
     }
+    // A counter the commit did not have yet.
+    let count = |x: f64| if x.is_nan() { "—".to_string() } else { format!("{x:.0}") };
     let mut keys: Vec<(u64, String)> = pour.iter().map(|r| (r.bodies, r.variant.clone())).collect();
     keys.sort();
     keys.dedup();
@@ -760,16 +762,16 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
         let pen = med(&rs, &|r| f(&r.s, &["max_penetration_m"]));
         let _ = writeln!(
             md,
-            "| {bodies} | {variant} | {} | {sim:.2} | {ended} | {wall:.3} | {outside:.3} | {worst:.3} | {:.0} % | {:.0} % | {:.0} % | {:.0} % | {:.0} | {qpe:.1} | {:.0} | {:.0} | {:.0} | {:.3} | {:.0} |",
+            "| {bodies} | {variant} | {} | {sim:.2} | {ended} | {wall:.3} | {outside:.3} | {worst:.3} | {:.0} % | {:.0} % | {:.0} % | {:.0} % | {:.0} | {qpe:.1} | {} | {} | {} | {:.3} | {:.0} |",
             rs.len(),
             100.0 * share("time_of_impact"),
             100.0 * share("solve_islands"),
             100.0 * share("narrowphase"),
             100.0 * share("broadphase"),
             c("toi_events"),
-            c("groups"),
-            c("largest_group"),
-            c("group_reruns"),
+            count(c("groups")),
+            count(c("largest_group")),
+            count(c("group_reruns")),
             1e6 * pen,
             c("overlaps_accepted"),
         );
@@ -791,6 +793,21 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
         rows.push((*bodies, variant.clone(), wall, qpe));
     }
     md.push('\n');
+    // Growth: the largest count against `pour_window` (200 bodies over the
+    // same simulated window), wall outside solve_islands, per commit.
+    let window: Vec<&Run> = runs.iter().filter(|r| r.series == "pour_window").collect();
+    if !window.is_empty() {
+        let big = keys.iter().map(|k| k.0).max().unwrap_or(0);
+        md.push_str("Growth over the same simulated window (the largest pour against 200 bodies), wall seconds outside `solve_islands`:\n\n| commit | 200 bodies [s] | ");
+        let _ = write!(md, "{big} bodies [s] | ratio |\n|---|---|---|---|\n");
+        for v in &variants {
+            let outside = |rs: Vec<&Run>| med(&rs, &|r| f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"]));
+            let small = outside(window.iter().copied().filter(|r| &r.variant == v).collect());
+            let large = outside(pour.iter().copied().filter(|r| &r.variant == v && r.bodies == big).collect());
+            let _ = writeln!(md, "| {v} | {small:.2} | {large:.2} | {:.1} |", large / small);
+        }
+        md.push('\n');
+    }
     std::fs::write(out.join("pours.csv"), csv).expect("write pours.csv");
     let series_of = |pick: &dyn Fn(&(u64, String, f64, f64)) -> f64| -> Vec<plot::Series> {
         variants
