@@ -190,20 +190,30 @@ pub fn separation_along(
 /// V-Clip alone: `None` when a part pair overlaps, else the smallest gap
 /// over the close part pairs (+∞ when none is close).
 pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
+    probe_apart(objects, task).map(|(gap, _)| gap)
+}
+
+/// `overlap_probe` with the closest part pair's axis, as `query_pair`
+/// gives them (`PairResult::closest_axis`): the same V-Clip walks from the
+/// same warm starts, without contact points.
+pub fn probe_apart(objects: &[ObjectDef], task: &PairTask) -> Option<(f64, Vector3<f64>)> {
     let (oa, ob) = (
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
     );
     let warm = WarmStarts::of(task);
-    let mut gap = f64::INFINITY;
+    let (mut gap, mut axis) = (f64::INFINITY, Vector3::zeros());
     for pair in close_part_pairs(oa, ob, task) {
         let prox = part_proximity(oa, ob, task, &warm, pair);
         if prox.penetrating {
             return None;
         }
-        gap = gap.min(prox.distance);
+        if prox.distance < gap {
+            gap = prox.distance;
+            axis = prox.point_a - prox.point_b;
+        }
     }
-    Some(gap)
+    Some((gap, axis))
 }
 
 /// A lower bound on the gap between the part pairs that `query_pair` and

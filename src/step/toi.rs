@@ -262,7 +262,7 @@ impl Region<'_> {
                 };
             }
             let (sa, sb) = self.states_at(a, b, seg, t);
-            let (r, task) = self.query_states(a, b, &sa, &sb);
+            let (r, task) = self.sample_states(a, b, &sa, &sb);
             if self.overlaps_more((a, b), &r, t, seg, since) {
                 return Sampled::Between {
                     lo: prev,
@@ -486,6 +486,34 @@ impl Region<'_> {
             self.integrate_segment(a, &seg[a], t - seg[a].time),
             self.integrate_segment(b, &seg[b], t - seg[b].time),
         )
+    }
+
+    /// A sample: V-Clip alone first; only a pair within the contact
+    /// tolerance needs its contact points (an overlap calls for a roll-back
+    /// only with them, `overlaps_more`), so only then the full query. The
+    /// same answer as `query_states` for every use a sample has, at a
+    /// fraction of the cost on many-faced bodies (the separating-axis
+    /// search behind contact points).
+    fn sample_states(
+        &mut self,
+        a: usize,
+        b: usize,
+        sa: &BodyState,
+        sb: &BodyState,
+    ) -> (PairResult, PairTask) {
+        let task = self.pair_task(a as u32, b as u32, sa, sb);
+        match narrowphase::probe_apart(self.st.objects, &task) {
+            Some((gap, axis)) if gap > CONTACT_TOLERANCE => {
+                self.counters.toi_bisection_queries += 1;
+                let r = PairResult {
+                    distance: gap,
+                    closest_axis: axis,
+                    ..Default::default()
+                };
+                (r, task)
+            }
+            _ => self.query_states(a, b, sa, sb),
+        }
     }
 
     fn query_states(
