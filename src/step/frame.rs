@@ -2,7 +2,7 @@
 //! function of its own, in the order the step takes them.
 
 use super::contact::{SpinResolves, Touching};
-use super::group::{self, GROUP_MARGIN, GroupRun, StepStart};
+use super::group::{self, GroupRun, StepStart};
 use super::region::{PairKey, Region, Segment};
 use super::stats::NumericalFailure;
 use super::toi::{Since, SolvedSince};
@@ -45,7 +45,7 @@ pub(super) fn step_world(
         end,
         pairs,
         results,
-        grown: grow(proxies),
+        grown: grow(proxies, w.st.group_margin),
         since: solved.since,
         separating: solved.separating,
         together: solved.together,
@@ -168,12 +168,12 @@ fn integrate(w: &mut Region, seg: &[Segment]) -> Vec<BodyState> {
     end
 }
 
-/// The predicted spheres grown by `GROUP_MARGIN`, as the groups are formed.
-fn grow(proxies: Vec<SphereProxy>) -> Vec<SphereProxy> {
+/// The predicted spheres grown by the group margin, as the groups are formed.
+fn grow(proxies: Vec<SphereProxy>, margin: f64) -> Vec<SphereProxy> {
     proxies
         .into_iter()
         .map(|p| SphereProxy {
-            radius: p.radius * (1.0 + GROUP_MARGIN),
+            radius: p.radius * (1.0 + margin),
             ..p
         })
         .collect()

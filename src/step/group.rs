@@ -44,7 +44,7 @@ use std::time::Instant;
 /// the 4 cm parts (a quarter of a sphere's radius) one did, in 11.4 s; at
 /// 3 cm none, in 11.6 s (larger groups cost more per event). Results do
 /// not depend on it (same state hash).
-pub(crate) const GROUP_MARGIN: f64 = 0.25;
+pub const GROUP_MARGIN: f64 = 0.25;
 
 /// What the whole world holds when the impact stage starts (world indices),
 /// from which every group's input is cut.
@@ -541,7 +541,7 @@ pub(crate) fn step_group<'s>(
             s.as_ref().map(|(s, _, _)| {
                 s.iter()
                     .map(|p| SphereProxy {
-                        radius: p.radius * (1.0 + GROUP_MARGIN),
+                        radius: p.radius * (1.0 + g.st.group_margin),
                         ..*p
                     })
                     .collect()

@@ -34,6 +34,7 @@ mod toi;
 
 pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
 pub(crate) use contact::{Touching, WarmContact};
+pub use group::GROUP_MARGIN;
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
 pub use stats::{Counters, NumericalFailure, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
@@ -135,6 +136,10 @@ pub struct World {
     /// (`solver::ITERATIVE_MIN_ROWS`; a test lowers it to make a small
     /// stack iterative).
     pub iterative_min_rows: usize,
+    /// Share of its radius by which each predicted sphere grows when the
+    /// groups are formed (`group::GROUP_MARGIN` by default; results do not
+    /// depend on it, a test compares).
+    pub group_margin: f64,
     pub(crate) touching: Vec<Touching>,
     /// Contacts of the impacts solved during the last step, for the
     /// separating-pair skip (only an optimisation: not checkpointed).
@@ -167,6 +172,7 @@ impl World {
             skip_separating: true,
             warm_start: true,
             iterative_min_rows: solver::ITERATIVE_MIN_ROWS,
+            group_margin: group::GROUP_MARGIN,
             touching: Vec::new(),
             impacts: Vec::new(),
             features: HashMap::new(),
@@ -225,6 +231,7 @@ impl World {
             iterative_min_rows: self.iterative_min_rows,
             sleep_enabled: self.sleep_enabled,
             sleep_after: self.sleep_after,
+            group_margin: self.group_margin,
         };
         use std::mem::take;
         let mut world = Region {

@@ -35,6 +35,8 @@ pub(crate) struct StepStatic<'s> {
     pub iterative_min_rows: usize,
     pub sleep_enabled: bool,
     pub sleep_after: f64,
+    /// `World::group_margin`.
+    pub group_margin: f64,
 }
 
 /// A body pair in local indices, `a < b`.

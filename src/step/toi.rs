@@ -129,9 +129,8 @@ impl Region<'_> {
     /// pair's deepest overlap then was the measure for every point, a new
     /// point of a pair already 7 µm deep landed 7 µm deep unseen: a bolt
     /// rolling on the 40-gon rim of its shaft's end, each rim corner in turn
-    /// landing so and the overlap recovery lifting it out
-    /// again, gained energy and wobbled for 50 s (docs/stability.md,
-    /// fragile 6).
+    /// landing so and the overlap recovery lifting it out again, gained
+    /// energy and wobbled for 50 s (docs/stability.md, fragile 6).
     ///
     /// Each point's two body points (A's and B's, at the point at `t`) are
     /// taken back to `since` with their bodies; their gap then, along the
