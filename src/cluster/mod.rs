@@ -16,7 +16,7 @@ use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::output::summary::{Distribution, RankSummary};
 use crate::run::{Frame, FrameRenderer, FrameSink};
 use crate::scene::Scene;
-use crate::step::Executor;
+use crate::step::{Executor, GroupInput, GroupParams, GroupReply, Inline, StepStatic, run_group};
 use mpi::point_to_point::{Destination, Source};
 use mpi::request::{Request, StaticScope};
 use mpi::topology::{Communicator, SimpleCommunicator};
@@ -166,6 +166,10 @@ const REPLY_DEADLINE: Duration = Duration::from_secs(10);
 
 /// Share of its speed that rank 0 plans for itself (it also packs and merges).
 const COORDINATOR_SHARE: f64 = 0.5;
+/// The same for group steps: a group's input and output are packed once,
+/// and rank 0 steps its own groups while the workers step theirs (requests
+/// posted first, replies gathered after), so it counts at its full speed.
+const COORDINATOR_SHARE_GROUPS: f64 = 1.0;
 
 /// Rank 0's executor: decides per stage and per frame whether to distribute,
 /// assigns tasks by cost, sends one message to each worker, does its own
@@ -304,6 +308,10 @@ impl<'w> MpiExecutor<'w> {
     /// from the measured round trip and the estimated speeds; see
     /// `schedule::workers_to_use`. `--force-distribute` uses them all.
     fn workers_for(&self, estimated_s: f64, tasks: usize) -> usize {
+        self.workers_for_share(estimated_s, tasks, COORDINATOR_SHARE)
+    }
+
+    fn workers_for_share(&self, estimated_s: f64, tasks: usize, share: f64) -> usize {
         let workers = self.roles.workers.len();
         if workers == 0 || tasks < 2 {
             return 0;
@@ -311,12 +319,12 @@ impl<'w> MpiExecutor<'w> {
         if self.force_distribute {
             return workers;
         }
-        schedule::workers_to_use(estimated_s, &self.speeds, COORDINATOR_SHARE, self.latency_s)
+        schedule::workers_to_use(estimated_s, &self.speeds, share, self.latency_s)
     }
 
     /// Splits tasks by the greedy rule over rank 0 and the `k` fastest
     /// workers; returns per slot the task indices.
-    fn plan(&self, costs: &[f64], k: usize) -> Vec<Vec<usize>> {
+    fn plan(&self, costs: &[f64], k: usize, share: f64) -> Vec<Vec<usize>> {
         let used = schedule::fastest_slots(&self.speeds, k);
         let speeds: Vec<f64> = self
             .speeds
@@ -324,7 +332,7 @@ impl<'w> MpiExecutor<'w> {
             .zip(&used)
             .map(|(&s, &u)| if u { s } else { 0.0 })
             .collect();
-        let slot = schedule::assign(costs, &speeds, COORDINATOR_SHARE);
+        let slot = schedule::assign(costs, &speeds, share);
         let mut per = vec![Vec::new(); self.speeds.len()];
         for (i, s) in slot.into_iter().enumerate() {
             per[s].push(i);
@@ -333,19 +341,21 @@ impl<'w> MpiExecutor<'w> {
     }
 
     /// Generic scatter–compute–gather for one stage.
+    #[allow(clippy::too_many_arguments)]
     fn distribute<T: Clone, R>(
         &mut self,
         workers: usize,
+        share: f64,
         tasks: Vec<T>,
         costs: &[f64],
         make: impl Fn(Vec<T>) -> Req,
         local: impl Fn(&[T]) -> Vec<R>,
         unpack: impl Fn(Reply) -> Option<(Vec<R>, f64)>,
-    ) -> (Vec<R>, f64, usize)
+    ) -> (Vec<R>, f64, Vec<usize>)
     where
         R: Default + Clone,
     {
-        let plan = self.plan(costs, workers);
+        let plan = self.plan(costs, workers, share);
         // Send each worker its share (one message each).
         for (k, idx) in plan.iter().enumerate().skip(1) {
             if idx.is_empty() {
@@ -400,7 +410,8 @@ impl<'w> MpiExecutor<'w> {
         }
         let waited = wait.elapsed().as_secs_f64();
         self.book[0].waiting_s += waited;
-        (results, total_busy, plan[0].len())
+        let own = plan.into_iter().next().unwrap_or_default();
+        (results, total_busy, own)
     }
 
     /// Updates a slot's speed from its batches (see `SpeedMeter`). The cost
@@ -505,6 +516,7 @@ impl Executor for MpiExecutor<'_> {
         self.dist.narrowphase_distributed += 1;
         let (results, total_busy, own_tasks) = self.distribute(
             workers,
+            COORDINATOR_SHARE,
             tasks,
             &costs,
             |share| Req::Narrowphase { tasks: share },
@@ -519,7 +531,7 @@ impl Executor for MpiExecutor<'_> {
             },
         );
         self.model.calibrate_pairs(units.iter().sum(), total_busy);
-        self.book[0].tasks_np += own_tasks as u64;
+        self.book[0].tasks_np += own_tasks.len() as u64;
         results
     }
 
@@ -551,6 +563,7 @@ impl Executor for MpiExecutor<'_> {
         self.dist.solve_distributed += 1;
         let (results, total_busy, own_tasks) = self.distribute(
             workers,
+            COORDINATOR_SHARE,
             tasks,
             &costs,
             |share| Req::SolveIslands { tasks: share },
@@ -561,8 +574,58 @@ impl Executor for MpiExecutor<'_> {
             },
         );
         self.model.calibrate_islands(units.iter().sum(), total_busy);
-        self.book[0].tasks_is += own_tasks as u64;
+        self.book[0].tasks_is += own_tasks.len() as u64;
         results
+    }
+
+    fn step_groups(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<GroupReply> {
+        // Seconds, from what the same bodies' groups took last step.
+        let costs: Vec<f64> = inputs.iter().map(GroupInput::predicted_s).collect();
+        let total: f64 = costs.iter().sum();
+        let workers = self.workers_for_share(total, inputs.len(), COORDINATOR_SHARE_GROUPS);
+        if workers == 0 {
+            // On rank 0, whose executor (this one) still scatters the
+            // groups' own narrowphase batches and island solves where they
+            // pay; those count their own tasks and busy time.
+            self.dist.groups_local += 1;
+            return inputs
+                .into_iter()
+                .map(|input| run_group(st, input, self))
+                .collect();
+        }
+        self.dist.groups_distributed += 1;
+        let (replies, total_busy, own) = self.distribute(
+            workers,
+            COORDINATOR_SHARE_GROUPS,
+            inputs,
+            &costs,
+            |share| Req::StepGroups {
+                params: params.clone(),
+                inputs: share,
+            },
+            |own| {
+                let mut inline = Inline::default();
+                own.iter()
+                    .map(|input| run_group(st, input.clone(), &mut inline))
+                    .collect()
+            },
+            |reply| match reply {
+                Reply::StepGroups { replies, busy_s } => Some((replies, busy_s)),
+                _ => None,
+            },
+        );
+        let _ = total_busy;
+        for &i in &own {
+            let (pairs, islands) = replies[i].tasks();
+            self.book[0].tasks_np += pairs;
+            self.book[0].tasks_is += islands;
+        }
+        replies
     }
 }
 
@@ -601,6 +664,25 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
                 report.busy_s += busy;
                 Reply::Narrowphase {
                     results,
+                    busy_s: busy,
+                }
+            }
+            Req::StepGroups { params, inputs } => {
+                let st = params.statics(scene);
+                let mut inline = Inline::default();
+                let replies: Vec<GroupReply> = inputs
+                    .into_iter()
+                    .map(|input| run_group(&st, input, &mut inline))
+                    .collect();
+                for r in &replies {
+                    let (pairs, islands) = r.tasks();
+                    report.narrowphase_tasks += pairs;
+                    report.island_tasks += islands;
+                }
+                let busy = stall(slow, clock, cpu).as_secs_f64();
+                report.busy_s += busy;
+                Reply::StepGroups {
+                    replies,
                     busy_s: busy,
                 }
             }

@@ -6,6 +6,7 @@
 use crate::collision::narrowphase::{PairResult, PairTask};
 use crate::contact::solver::{IslandResult, IslandTask};
 use crate::run::Frame;
+use crate::step::{GroupInput, GroupParams, GroupReply};
 use serde::{Deserialize, Serialize};
 
 /// Rank 0 → worker requests.
@@ -25,6 +26,14 @@ pub enum Request {
     Narrowphase { tasks: Vec<PairTask> },
     /// `solve_islands` stage: these contact systems. Contact request.
     SolveIslands { tasks: Vec<IslandTask> },
+    /// `time_of_impact` stage: these interaction groups, each stepped
+    /// whole (`step::run_group`: its end-of-step results, impact events,
+    /// re-solves), with the step's start time and switches. The worker
+    /// runs their narrowphase batches and island solves itself.
+    StepGroups {
+        params: GroupParams,
+        inputs: Vec<GroupInput>,
+    },
     /// Start-up latency probe: the worker answers `Pong` at once.
     Ping,
     /// End of run: the worker answers `Report` and exits.
@@ -41,6 +50,11 @@ pub enum Reply {
     },
     SolveIslands {
         results: Vec<IslandResult>,
+        busy_s: f64,
+    },
+    /// One answer per group of the request, in its order.
+    StepGroups {
+        replies: Vec<GroupReply>,
         busy_s: f64,
     },
     Pong,

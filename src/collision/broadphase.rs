@@ -9,7 +9,7 @@
 use nalgebra::Vector3;
 
 /// One world-space sphere of one body.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SphereProxy {
     pub body: u32,
     pub center: Vector3<f64>,

@@ -2,7 +2,7 @@
 //! function of its own, in the order the step takes them.
 
 use super::contact::{SpinResolves, Touching};
-use super::group::{self, GroupRun, StepStart};
+use super::group::{self, GroupOutput, StepStart};
 use super::region::{PairKey, Region, Segment};
 use super::stats::NumericalFailure;
 use super::toi::{Since, SolvedSince};
@@ -22,6 +22,7 @@ pub(super) fn step_world(
     exec: &mut dyn Executor,
     max_penetration: &mut f64,
     steps: &mut u64,
+    body_cost: &mut Vec<f64>,
 ) -> Result<(), NumericalFailure> {
     let (h, t0) = (w.st.settings.dt, w.st.t0);
     w.wake_for_forces(t0, h);
@@ -51,8 +52,18 @@ pub(super) fn step_world(
         together: solved.together,
         spin_resolves: solved.spin_resolves,
         touching: start_touching.iter().map(|t| (t.a.0, t.b.0)).collect(),
+        body_cost: std::mem::take(body_cost),
     };
     let (runs, reruns) = group::step_groups(w.st, w, &start, exec)?;
+    *body_cost = start.body_cost.clone();
+    for g in &runs {
+        let members = g.bodies.iter().filter(|b| b.is_dynamic()).count().max(1);
+        for (b, &id) in g.bodies.iter().zip(&g.ids) {
+            if b.is_dynamic() {
+                body_cost[id as usize] = g.busy_s / members as f64;
+            }
+        }
+    }
     let merged = merge_groups(w, runs, reruns);
     w.stage.time_of_impact += clock.elapsed().as_secs_f64() - merged.nested;
     // Commit the end states, the contacts touching now and the caches.
@@ -192,7 +203,7 @@ struct Merged {
 /// Takes each group's results into the world, in group-id order: its
 /// bodies' activity, warm starts, impacts, forces, counters and stage
 /// times now; its end states and pairs for `commit`.
-fn merge_groups(w: &mut Region, runs: Vec<GroupRun>, reruns: u64) -> Merged {
+fn merge_groups(w: &mut Region, runs: Vec<GroupOutput>, reruns: u64) -> Merged {
     let mut merged = Merged {
         ends: Vec::new(),
         pairs: Vec::new(),
@@ -201,8 +212,7 @@ fn merge_groups(w: &mut Region, runs: Vec<GroupRun>, reruns: u64) -> Merged {
     let mut events = 0u64;
     w.counters.groups += runs.len() as u64;
     w.counters.group_reruns += reruns;
-    for run in runs {
-        let g = run.region;
+    for g in runs {
         let ids = &g.ids;
         let mut size = 0u64;
         for (i, &id) in ids.iter().enumerate() {
@@ -213,13 +223,13 @@ fn merge_groups(w: &mut Region, runs: Vec<GroupRun>, reruns: u64) -> Merged {
             size += u64::from(g.bodies[i].activity == Activity::Awake);
             w.bodies[wi].activity = g.bodies[i].activity;
             w.sleep_timer[wi] = g.sleep_timer[i];
-            merged.ends.push((wi, run.end[i]));
+            merged.ends.push((wi, g.end[i]));
         }
         w.counters.largest_group = w.counters.largest_group.max(size);
         let world_key = |(a, b): PairKey| (ids[a as usize], ids[b as usize]);
         merged
             .pairs
-            .extend(run.pairs.iter().map(|&k| world_key(k)).zip(run.results));
+            .extend(g.pairs.iter().map(|&k| world_key(k)).zip(g.results));
         w.warm
             .extend(g.warm.into_iter().map(|e| group::to_world_warm(ids, e)));
         w.impacts.extend(
@@ -239,7 +249,7 @@ fn merge_groups(w: &mut Region, runs: Vec<GroupRun>, reruns: u64) -> Merged {
         w.stage.build_islands += g.stage.build_islands;
         w.stage.solve_islands += g.stage.solve_islands;
         w.stage.integrate += g.stage.integrate;
-        events += run.events;
+        events += g.events;
     }
     w.counters.max_events_in_step = w.counters.max_events_in_step.max(events);
     if events > 0 {

@@ -17,7 +17,7 @@
 //!
 //! An impact can send a body outside the spheres it was grouped by. After
 //! every group has run, the paths the bodies took since their first
-//! roll-back (`GroupRun::pieces`) are tested against every body's predicted
+//! roll-back (`GroupOutput::pieces`) are tested against every body's predicted
 //! spheres and against each other (`find_leaks`); where a path meets another
 //! group, the two merge, and where it meets a body outside its input, that
 //! body joins; either way the group is stepped again from the step's start.
@@ -29,11 +29,15 @@ use super::region::{PairKey, Region, Segment, StepStatic};
 use super::stats::{Counters, NumericalFailure, StageSeconds};
 use super::toi::{Since, SolvedSince};
 use super::{EVENTS_PER_MOVING_BODY, Executor, MAX_EARLIER_IMPACTS, MIN_EVENTS_PER_STEP};
+use crate::body::Body;
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::{self, SphereProxy};
+use crate::collision::narrowphase::CachedFeatures;
 use crate::collision::narrowphase::PairResult;
 use crate::contact::island::DisjointSets;
+use crate::scene::Scene;
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::Instant;
 
@@ -64,6 +68,9 @@ pub(crate) struct StepStart {
     pub spin_resolves: SpinResolves,
     /// Contacts touching at the step's start.
     pub touching: Vec<PairKey>,
+    /// Seconds each body's group step took last step, shared out over its
+    /// members (the schedule's prediction; never part of a result).
+    pub body_cost: Vec<f64>,
 }
 
 /// The bodies of one group, as world ids.
@@ -186,28 +193,13 @@ pub(crate) struct StartIndex {
     pub warm: PairIndex,
 }
 
-/// One group's run: its region, what its impact loop carried, and what it
-/// found.
-pub(crate) struct GroupRun<'s> {
-    pub region: Region<'s>,
-    pub end: Vec<BodyState>,
-    pub pairs: Vec<PairKey>,
-    pub results: Vec<PairResult>,
-    /// Impact events taken (spin re-solves not counted).
-    pub events: u64,
-    /// Swept spheres (world ids) of the paths its bodies took after their
-    /// first roll-back: what may have left the spheres it was grouped by.
-    pub pieces: Vec<SphereProxy>,
-}
-
 /// The group's input, cut from the world at the start of the impact stage.
-pub(crate) fn group_input<'s>(
-    st: &'s StepStatic<'s>,
-    world: &Region<'s>,
+pub(crate) fn group_input(
+    world: &Region,
     start: &StepStart,
     index: &StartIndex,
     plan: &GroupPlan,
-) -> (Region<'s>, GroupState) {
+) -> GroupInput {
     let mut ids: Vec<u32> = plan
         .members
         .iter()
@@ -249,37 +241,34 @@ pub(crate) fn group_input<'s>(
         .into_iter()
         .map(|k| (key(k), start.separating[&k]))
         .collect();
-    let pick = |w: &u32| world.bodies[*w as usize].clone();
-    let region = Region {
-        st,
-        bodies: ids.iter().map(pick).collect(),
-        sleep_timer: ids.iter().map(|&w| world.sleep_timer[w as usize]).collect(),
-        sleep_group: ids.iter().map(|&w| world.sleep_group[w as usize]).collect(),
-        features,
-        warm,
-        counters: Counters::default(),
-        stage: StageSeconds::default(),
-        impacts: Vec::new(),
-        pair_forces: BTreeMap::new(),
-        ids: Vec::new(),
-    };
-    let mut together = SolvedTogether::new(ids.len());
-    let islands: Vec<Vec<usize>> = start
+    let together = start
         .together
         .iter()
         .filter(|bodies| ids.binary_search(&(bodies[0] as u32)).is_ok())
         .map(|bodies| bodies.iter().map(|&i| local(i as u32) as usize).collect())
         .collect();
-    together.record_islands(islands);
-    let spin_resolves = SpinResolves(
-        start
-            .spin_resolves
-            .0
+    let spin_resolves = start
+        .spin_resolves
+        .0
+        .iter()
+        .filter_map(|&(t, i)| ids.binary_search(&(i as u32)).ok().map(|l| (t, l)))
+        .collect();
+    // A body never grouped before counts as a pair test's worth (10 µs).
+    let predicted_s = plan
+        .members
+        .iter()
+        .map(|&i| start.body_cost[i as usize].max(1e-5))
+        .sum();
+    GroupInput {
+        predicted_s,
+        bodies: ids
             .iter()
-            .filter_map(|&(t, i)| ids.binary_search(&(i as u32)).ok().map(|l| (t, l)))
+            .map(|&w| world.bodies[w as usize].clone())
             .collect(),
-    );
-    let state = GroupState {
+        sleep_timer: ids.iter().map(|&w| world.sleep_timer[w as usize]).collect(),
+        sleep_group: ids.iter().map(|&w| world.sleep_group[w as usize]).collect(),
+        features,
+        warm,
         seg: ids.iter().map(|&w| start.seg[w as usize]).collect(),
         end: ids.iter().map(|&w| start.end[w as usize]).collect(),
         pairs: plan.pairs.iter().map(|&k| key(start.pairs[k])).collect(),
@@ -292,9 +281,8 @@ pub(crate) fn group_input<'s>(
         separating,
         together,
         spin_resolves,
-    };
-    let region = Region { ids, ..region };
-    (region, state)
+        ids,
+    }
 }
 
 /// What a group's impact loop carries from one event to the next.
@@ -504,15 +492,223 @@ impl PairBook {
     }
 }
 
+/// What a group's step reads besides the scene: the step's start time and
+/// the world's switches. Sent with the groups a worker steps.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct GroupParams {
+    t0: f64,
+    skip_separating: bool,
+    warm_start: bool,
+    iterative_min_rows: usize,
+    sleep_enabled: bool,
+    sleep_after: f64,
+    group_margin: f64,
+}
+
+impl GroupParams {
+    pub(crate) fn of(st: &StepStatic) -> Self {
+        GroupParams {
+            t0: st.t0,
+            skip_separating: st.skip_separating,
+            warm_start: st.warm_start,
+            iterative_min_rows: st.iterative_min_rows,
+            sleep_enabled: st.sleep_enabled,
+            sleep_after: st.sleep_after,
+            group_margin: st.group_margin,
+        }
+    }
+
+    /// The step's static data, with a scene that every rank loaded alike.
+    pub fn statics<'s>(&self, scene: &'s Scene) -> StepStatic<'s> {
+        StepStatic {
+            objects: &scene.objects,
+            settings: &scene.settings,
+            forces: &scene.forces,
+            t0: self.t0,
+            skip_separating: self.skip_separating,
+            warm_start: self.warm_start,
+            iterative_min_rows: self.iterative_min_rows,
+            sleep_enabled: self.sleep_enabled,
+            sleep_after: self.sleep_after,
+            group_margin: self.group_margin,
+        }
+    }
+}
+
+/// One group's input, ids and state only (`group_input`): what rank 0 sends
+/// a worker to step.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct GroupInput {
+    ids: Vec<u32>,
+    bodies: Vec<Body>,
+    features: Vec<(PairKey, Vec<CachedFeatures>)>,
+    warm: Vec<((BodyId, BodyId), Vec<WarmContact>)>,
+    sleep_timer: Vec<f64>,
+    sleep_group: Vec<u32>,
+    seg: Vec<Segment>,
+    end: Vec<BodyState>,
+    pairs: Vec<PairKey>,
+    results: Vec<PairResult>,
+    since: Vec<(PairKey, Since)>,
+    separating: Vec<(PairKey, Vector3<f64>)>,
+    /// Islands solved together at the step's start (local indices).
+    together: Vec<Vec<usize>>,
+    spin_resolves: Vec<(f64, usize)>,
+    /// Seconds its step is expected to take: what its bodies' groups took
+    /// last step (`GroupOutput::busy_s`, shared out over their members).
+    predicted_s: f64,
+}
+
+impl GroupInput {
+    /// Seconds its step is expected to take, for the schedule.
+    pub fn predicted_s(&self) -> f64 {
+        self.predicted_s
+    }
+}
+
+/// What a group's step returns (`step_group`), ids and state only.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct GroupOutput {
+    pub(crate) ids: Vec<u32>,
+    pub(crate) bodies: Vec<Body>,
+    pub(crate) sleep_timer: Vec<f64>,
+    pub(crate) end: Vec<BodyState>,
+    pub(crate) pairs: Vec<PairKey>,
+    pub(crate) results: Vec<PairResult>,
+    pub(crate) warm: Vec<((BodyId, BodyId), Vec<WarmContact>)>,
+    pub(crate) impacts: Vec<Touching>,
+    pub(crate) pair_forces: Vec<((BodyId, BodyId), f64)>,
+    pub(crate) counters: Counters,
+    pub(crate) stage: StageSeconds,
+    /// Impact events taken (spin re-solves not counted).
+    pub(crate) events: u64,
+    /// Swept spheres (world ids) of the paths its bodies took after their
+    /// first roll-back that leave their grown prediction.
+    pub(crate) pieces: Vec<SphereProxy>,
+    /// Wall seconds the step took where it ran (the next step's prediction).
+    pub(crate) busy_s: f64,
+}
+
+impl GroupOutput {
+    /// V-Clip tasks and island solves the group's step ran.
+    pub fn tasks(&self) -> (u64, u64) {
+        (self.counters.pair_tests, self.counters.islands)
+    }
+}
+
+/// A numerical failure inside a group's step, as it travels between ranks.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct GroupFailure {
+    body: u32,
+    stage: String,
+    time: f64,
+    detail: String,
+}
+
+impl From<NumericalFailure> for GroupFailure {
+    fn from(f: NumericalFailure) -> Self {
+        GroupFailure {
+            body: f.body.0,
+            stage: f.stage.to_string(),
+            time: f.time,
+            detail: f.detail,
+        }
+    }
+}
+
+impl From<GroupFailure> for NumericalFailure {
+    fn from(f: GroupFailure) -> Self {
+        NumericalFailure {
+            body: BodyId(f.body),
+            stage: if f.stage == "integrate" {
+                "integrate"
+            } else {
+                "solve_islands"
+            },
+            time: f.time,
+            detail: f.detail,
+        }
+    }
+}
+
+/// One group's answer: its output, or where it went numerically wrong.
+/// (`None` only as a placeholder while answers are gathered.)
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct GroupReply(pub(crate) Option<Result<GroupOutput, GroupFailure>>);
+
+impl GroupReply {
+    /// V-Clip tasks and island solves the group's step ran.
+    pub fn tasks(&self) -> (u64, u64) {
+        match &self.0 {
+            Some(Ok(out)) => out.tasks(),
+            _ => (0, 0),
+        }
+    }
+}
+
+/// Steps one group from its input, anywhere: the same function on rank 0
+/// and on a worker. Its narrowphase batches and island solves go through
+/// `exec`.
+pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) -> GroupReply {
+    let GroupInput {
+        ids,
+        bodies,
+        features,
+        warm,
+        sleep_timer,
+        sleep_group,
+        seg,
+        end,
+        pairs,
+        results,
+        since,
+        separating,
+        together: islands,
+        spin_resolves,
+        predicted_s: _,
+    } = input;
+    let clock = std::time::Instant::now();
+    let mut together = SolvedTogether::new(ids.len());
+    together.record_islands(islands);
+    let region = Region {
+        st,
+        ids,
+        bodies,
+        features: features.into_iter().collect(),
+        warm: warm.into_iter().collect(),
+        sleep_timer,
+        sleep_group,
+        counters: Counters::default(),
+        stage: StageSeconds::default(),
+        impacts: Vec::new(),
+        pair_forces: BTreeMap::new(),
+    };
+    let state = GroupState {
+        seg,
+        end,
+        pairs,
+        results,
+        since: since.into_iter().collect(),
+        separating: separating.into_iter().collect(),
+        together,
+        spin_resolves: SpinResolves(spin_resolves),
+    };
+    let output = step_group(region, state, exec).map(|mut out| {
+        out.busy_s = clock.elapsed().as_secs_f64();
+        out
+    });
+    GroupReply(Some(output.map_err(GroupFailure::from)))
+}
+
 /// The group step: every impact event of the group in time order. An event
 /// rolls the bodies that must move with it back to its instant τ, solves
 /// their contacts there, re-integrates them to the step's end and retests
 /// their pairs; the loop ends when no pair overlaps beyond what it carried.
-pub(crate) fn step_group<'s>(
-    mut g: Region<'s>,
+pub(crate) fn step_group(
+    mut g: Region,
     s: GroupState,
     exec: &mut dyn Executor,
-) -> Result<GroupRun<'s>, NumericalFailure> {
+) -> Result<GroupOutput, NumericalFailure> {
     let h = g.st.settings.dt;
     let t0 = g.st.t0;
     let n = g.bodies.len();
@@ -691,13 +887,21 @@ pub(crate) fn step_group<'s>(
     g.counters.toi_events += events as u64;
     g.stage.time_of_impact += clock.elapsed().as_secs_f64() - (g.stage.nested() - nested_before);
     let (pairs, results) = book.results.into_iter().unzip();
-    Ok(GroupRun {
-        region: g,
+    Ok(GroupOutput {
+        ids: g.ids,
+        bodies: g.bodies,
+        sleep_timer: g.sleep_timer,
         end,
         pairs,
         results,
+        warm: g.warm.into_iter().collect(),
+        impacts: g.impacts,
+        pair_forces: g.pair_forces.into_iter().collect(),
+        counters: g.counters,
+        stage: g.stage,
         events: events as u64,
         pieces,
+        busy_s: 0.0,
     })
 }
 
@@ -716,7 +920,7 @@ fn find_leaks(
     n: usize,
     start: &StepStart,
     plans: &[GroupPlan],
-    runs: &[Option<GroupRun>],
+    runs: &[Option<GroupOutput>],
     owner: &[Option<usize>],
 ) -> Vec<(usize, Leak)> {
     let mut pieces = Vec::new();
@@ -757,7 +961,7 @@ pub(crate) fn step_groups<'s>(
     world: &Region<'s>,
     start: &StepStart,
     exec: &mut dyn Executor,
-) -> Result<(Vec<GroupRun<'s>>, u64), NumericalFailure> {
+) -> Result<(Vec<GroupOutput>, u64), NumericalFailure> {
     let n = world.bodies.len();
     let index = StartIndex {
         features: PairIndex::new(n, world.features.keys()),
@@ -774,14 +978,20 @@ pub(crate) fn step_groups<'s>(
         ),
     };
     let mut plans = plan_groups(world, start);
-    let mut runs: Vec<Option<GroupRun<'s>>> = (0..plans.len()).map(|_| None).collect();
+    let mut runs: Vec<Option<GroupOutput>> = (0..plans.len()).map(|_| None).collect();
+    let params = GroupParams::of(st);
     let mut reruns = 0u64;
     loop {
-        for (p, plan) in plans.iter().enumerate() {
-            if runs[p].is_none() {
-                let (region, state) = group_input(st, world, start, &index, plan);
-                runs[p] = Some(step_group(region, state, exec)?);
-            }
+        // Every group still to step, through the executor (inline, or
+        // scattered over the workers); answers come back in group order.
+        let todo: Vec<usize> = (0..plans.len()).filter(|&p| runs[p].is_none()).collect();
+        let inputs = todo
+            .iter()
+            .map(|&p| group_input(world, start, &index, &plans[p]))
+            .collect();
+        for (p, reply) in todo.into_iter().zip(exec.step_groups(st, &params, inputs)) {
+            let output = reply.0.expect("every group answered")?;
+            runs[p] = Some(output);
         }
         let mut owner: Vec<Option<usize>> = vec![None; n];
         for (p, plan) in plans.iter().enumerate() {
@@ -831,7 +1041,7 @@ pub(crate) fn step_groups<'s>(
                 }
             }
         }
-        let mut old_runs: Vec<Option<GroupRun<'s>>> = runs.into_iter().collect();
+        let mut old_runs: Vec<Option<GroupOutput>> = runs;
         plans = Vec::new();
         runs = Vec::new();
         for (root, mut m) in merged {
@@ -852,7 +1062,7 @@ pub(crate) fn step_groups<'s>(
         // Keep the plans in id order (a merged group takes its lowest member).
         let mut order: Vec<usize> = (0..plans.len()).collect();
         order.sort_by_key(|&p| plans[p].id());
-        let mut taken: Vec<Option<(GroupPlan, Option<GroupRun<'s>>)>> =
+        let mut taken: Vec<Option<(GroupPlan, Option<GroupOutput>)>> =
             plans.into_iter().zip(runs).map(Some).collect();
         plans = Vec::new();
         runs = Vec::new();

@@ -34,7 +34,10 @@ mod toi;
 
 pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
 pub(crate) use contact::{Touching, WarmContact};
-pub use group::GROUP_MARGIN;
+pub use group::{
+    GROUP_MARGIN, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, run_group,
+};
+pub use region::StepStatic;
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
 pub use stats::{Counters, NumericalFailure, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
@@ -44,7 +47,7 @@ use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
-use region::{Region, StepStatic};
+use region::Region;
 use stats::{Distribution, RankSummary};
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
@@ -53,6 +56,14 @@ use std::time::Instant;
 pub trait Executor {
     fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult>;
     fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult>;
+    /// The `time_of_impact` stage: each group's step (`group::run_group`),
+    /// answers in the order of `inputs`.
+    fn step_groups(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<GroupReply>;
     /// Ends the run on every rank; returns the per-rank accounts and how often
     /// each stage was distributed.
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution);
@@ -86,6 +97,18 @@ impl Executor for Inline {
         let r = tasks.iter().map(solver::solve_island).collect();
         self.busy_s += clock.elapsed().as_secs_f64();
         r
+    }
+    fn step_groups(
+        &mut self,
+        st: &StepStatic,
+        _params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<GroupReply> {
+        // Busy time and tasks are counted by the stages the groups call.
+        inputs
+            .into_iter()
+            .map(|input| group::run_group(st, input, self))
+            .collect()
     }
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
         let me = RankSummary {
@@ -144,6 +167,9 @@ pub struct World {
     /// Contacts of the impacts solved during the last step, for the
     /// separating-pair skip (only an optimisation: not checkpointed).
     impacts: Vec<Touching>,
+    /// Seconds each body's group step took last step (the schedule's
+    /// prediction of the next; never part of a result, not checkpointed).
+    body_cost: Vec<f64>,
     pub(crate) features: HashMap<(u32, u32), Vec<CachedFeatures>>,
     pub(crate) sleep_timer: Vec<f64>,
     /// Resting system a sleeping body belongs to (its lowest body id).
@@ -175,6 +201,7 @@ impl World {
             group_margin: group::GROUP_MARGIN,
             touching: Vec::new(),
             impacts: Vec::new(),
+            body_cost: vec![0.0; n],
             features: HashMap::new(),
             sleep_timer: vec![0.0; n],
             sleep_group: (0..n as u32).collect(),
@@ -255,6 +282,7 @@ impl World {
             exec,
             &mut self.max_penetration,
             &mut self.steps,
+            &mut self.body_cost,
         );
         // Back into the world, also after a numerical failure (the run
         // keeps what it has: the states are those before the failing stage).

@@ -24,19 +24,19 @@ use std::time::Instant;
 /// What every region of one step reads and nothing changes: the scene's
 /// objects, settings and force windows, the step's start time, and the
 /// world's switches.
-pub(crate) struct StepStatic<'s> {
-    pub objects: &'s [ObjectDef],
-    pub settings: &'s Settings,
-    pub forces: &'s [ForceWindow],
+pub struct StepStatic<'s> {
+    pub(crate) objects: &'s [ObjectDef],
+    pub(crate) settings: &'s Settings,
+    pub(crate) forces: &'s [ForceWindow],
     /// Simulated time at the step's start.
-    pub t0: f64,
-    pub skip_separating: bool,
-    pub warm_start: bool,
-    pub iterative_min_rows: usize,
-    pub sleep_enabled: bool,
-    pub sleep_after: f64,
+    pub(crate) t0: f64,
+    pub(crate) skip_separating: bool,
+    pub(crate) warm_start: bool,
+    pub(crate) iterative_min_rows: usize,
+    pub(crate) sleep_enabled: bool,
+    pub(crate) sleep_after: f64,
     /// `World::group_margin`.
-    pub group_margin: f64,
+    pub(crate) group_margin: f64,
 }
 
 /// A body pair in local indices, `a < b`.
@@ -66,7 +66,7 @@ pub(crate) struct Region<'s> {
 
 /// A body's motion over the current step: start state at `time` (seconds into
 /// the step) with constant force and torque until the end of the step.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub(crate) struct Segment {
     pub state: BodyState,
     pub time: f64,

@@ -136,5 +136,9 @@ pub struct Distribution {
     pub narrowphase_local: u64,
     pub solve_distributed: u64,
     pub solve_local: u64,
+    /// Steps whose group steps (`time_of_impact`) went to workers, and
+    /// steps that ran them on rank 0 alone.
+    pub groups_distributed: u64,
+    pub groups_local: u64,
     pub message_latency_s: f64,
 }

@@ -40,7 +40,7 @@ pub(crate) fn allowed_depth(carried: f64) -> f64 {
 /// (`Region::sinking`). Pairs not listed carried none.
 pub(crate) type SolvedSince = HashMap<PairKey, Since>;
 
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub(crate) struct Since {
     pub time: f64,
     pub deepest: f64,
