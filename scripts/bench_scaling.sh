@@ -8,7 +8,8 @@
 #      computes; at 10 Hz (dt = 0.01 s, the thesis) and at 60 Hz (dt = frame
 #      = 1/60 s);
 #   3. heterogeneous ranks: 3 ranks with worker 2 slowed 3x (--slow-rank);
-#   4. real cores: bench/scenes/eight_stacks.toml (--no-sleep, no render) on
+#   4. real cores: bench/scenes/eight_stacks.toml (--no-sleep, no render) and
+#      the 200-body pour for 2 s (no render), on
 #      1 rank and on as many ranks as there are cores (CORE_RANKS), never
 #      oversubscribed: what distributing gains.
 # Then bench/tools turns the summaries into CSV, Markdown and PNG under
@@ -128,9 +129,16 @@ done
 
 echo "bench_scaling: real cores"
 CORE_RANKS=${CORE_RANKS:-$(nproc)}
+# The 200-body pour of scripts/stress.sh (crowd200), 2 s: its group steps
+# are the distributed work (POUR_DURATION seconds).
+pour_opts=(--duration "${POUR_DURATION:-2.0}")
+[ "$tiny" = 1 ] && pour_opts=()   # extra already holds --tiny's duration
+sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
+    -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml >"$tmp/crowd200.toml"
 for rep in $(seq 1 "$REPS"); do
   for r in $(printf '%s\n' 1 "$CORE_RANKS" | sort -un); do
     run cores 121 "$r" compute "$rep" bench/scenes/eight_stacks.toml --no-render --no-sleep
+    run cores_pour 201 "$r" compute "$rep" "$tmp/crowd200.toml" --no-render "${pour_opts[@]}"
   done
 done
 

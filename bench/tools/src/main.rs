@@ -95,6 +95,7 @@ fn main() {
     scaling(&runs, &out, &mut md);
     hetero(&runs, &out, &mut md);
     real_cores(&runs, &out, &mut md);
+    real_cores_pour(&runs, &out, &mut md);
     pours(&runs, &out, &mut md);
     if !missing.is_empty() {
         let _ = writeln!(
@@ -844,4 +845,52 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
     }
     std::fs::write(out.join("pours.md"), md.split("## Pours").nth(1).map(|t| format!("## Pours{t}")).unwrap_or_default())
         .expect("write pours.md");
+}
+
+/// The 200-body pour on 1 rank and on every core (series `cores_pour`):
+/// medians of wall time and worst frame, the share of steps whose group
+/// steps were distributed, and the hash check; `cores_pour.csv`.
+fn real_cores_pour(runs: &[Run], out: &Path, md: &mut String) {
+    let rs: Vec<&Run> = runs.iter().filter(|r| r.series == "cores_pour").collect();
+    if rs.is_empty() {
+        return;
+    }
+    let mut by: BTreeMap<u32, Vec<&Run>> = BTreeMap::new();
+    for r in &rs {
+        by.entry(r.ranks).or_default().push(r);
+    }
+    let hashes: std::collections::BTreeSet<&str> = rs
+        .iter()
+        .filter_map(|r| r.s["state_hash"].as_str())
+        .collect();
+    let one = by
+        .get(&1)
+        .map(|rs| median(&rs.iter().map(|r| f(&r.s, &["wall_time_s"])).collect::<Vec<_>>()));
+    let mut csv = String::from("ranks,runs,wall_median_s,wall_over_one_rank,worst_frame_median_s,groups_distributed_share\n");
+    md.push_str("## Distribution on real cores: the 200-body pour, no rendering\n\n");
+    md.push_str("| ranks | runs | wall [s] | against 1 rank | worst frame [ms] | steps with group steps distributed |\n|---|---|---|---|---|---|\n");
+    for (ranks, rs) in &by {
+        let m = |g: &dyn Fn(&Value) -> f64| median(&rs.iter().map(|r| g(&r.s)).collect::<Vec<_>>());
+        let wall = m(&|s| f(s, &["wall_time_s"]));
+        let worst = m(&|s| f(s, &["worst_frame_s"]));
+        let share = m(&|s| {
+            let d = f(s, &["distributed", "groups_distributed"]);
+            d / (d + f(s, &["distributed", "groups_local"])).max(1.0)
+        });
+        let ratio = one.map_or(f64::NAN, |o| wall / o);
+        let _ = writeln!(csv, "{ranks},{},{wall:e},{ratio:.4},{worst:e},{share:.4}", rs.len());
+        let _ = writeln!(
+            md,
+            "| {ranks} | {} | {wall:.3} | {ratio:.2} | {:.1} | {:.0} % |",
+            rs.len(),
+            worst * 1e3,
+            share * 100.0
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nState hashes: {} (must be one).\n",
+        if hashes.len() == 1 { "all equal" } else { "DIFFER" }
+    );
+    std::fs::write(out.join("cores_pour.csv"), csv).expect("write cores_pour.csv");
 }
