@@ -329,6 +329,11 @@ fn state_hash_and_trajectory_are_identical_on_1_2_3_and_5_ranks() {
             other.what
         );
         assert!(
+            other.count(&["distributed", "groups_distributed"]) > 0,
+            "{}: no group step was distributed",
+            other.what
+        );
+        assert!(
             other.per_rank()[1..]
                 .iter()
                 .all(|r| r["narrowphase_tasks"].as_u64().unwrap() > 0),
