@@ -944,3 +944,34 @@ fn stalled_worker_ends_the_job_with_an_error_naming_the_rank() {
         "{what}: the message does not name rank 1:\n{stderr}"
     );
 }
+
+/// `summary.json` reports the parallel fraction p (the share of the wall
+/// time spent in stages other ranks can take) and the Amdahl bound
+/// 1 / (1 − p); on the nuts and bolts most of a rank's time is such work.
+#[test]
+fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let nuts = scene("nuts_and_bolts.toml");
+    let r = run(
+        root.path(),
+        "alone",
+        Ranks::Alone,
+        &nuts,
+        &["--duration", "1.0", "--no-render"],
+    );
+    let d = &r.summary["distributed"];
+    let p = d["parallel_fraction"].as_f64().unwrap();
+    let bound = d["amdahl_bound"].as_f64().unwrap();
+    let wall = r.summary["wall_time_s"].as_f64().unwrap();
+    let inside = d["distributable_s"].as_f64().unwrap();
+    assert!(p > 0.3 && p <= 1.0, "parallel fraction {p}");
+    assert!(
+        (p - inside / wall).abs() <= 1e-12,
+        "{p} against {inside} / {wall}"
+    );
+    assert!(
+        (bound - 1.0 / (1.0 - p)).abs() <= 1e-9 * bound,
+        "bound {bound} for p = {p}"
+    );
+}

@@ -16,6 +16,7 @@ use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::output::summary::{Distribution, RankSummary};
 use crate::run::{Frame, FrameRenderer, FrameSink};
 use crate::scene::Scene;
+use crate::step::stats::StageClock;
 use crate::step::{Executor, GroupInput, GroupParams, GroupReply, Inline, StepStatic, run_group};
 use mpi::point_to_point::{Destination, Source};
 use mpi::request::{Request, StaticScope};
@@ -184,6 +185,7 @@ pub struct MpiExecutor<'w> {
     meters: Vec<SpeedMeter>,
     latency_s: f64,
     dist: Distribution,
+    clock: StageClock,
     polygons: Vec<usize>,
     parts: Vec<usize>,
     /// Distribute regardless of cost (tests of determinism and balance).
@@ -201,6 +203,7 @@ impl<'w> MpiExecutor<'w> {
             meters: vec![SpeedMeter::default(); slots],
             latency_s: 0.0,
             dist: Distribution::default(),
+            clock: StageClock::default(),
             polygons: objects.iter().map(|o| o.polygon_count).collect(),
             parts: objects.iter().map(|o| o.parts.len()).collect(),
             force_distribute: false,
@@ -484,6 +487,38 @@ impl Executor for MpiExecutor<'_> {
     }
 
     fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
+        self.clock.enter();
+        let r = self.narrowphase_stage(objects, tasks);
+        self.dist.distributable_s += self.clock.leave();
+        r
+    }
+
+    fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
+        self.clock.enter();
+        let r = self.solve_islands_stage(tasks);
+        self.dist.distributable_s += self.clock.leave();
+        r
+    }
+
+    fn step_groups(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<GroupReply> {
+        self.clock.enter();
+        let r = self.step_groups_stage(st, params, inputs);
+        self.dist.distributable_s += self.clock.leave();
+        r
+    }
+}
+
+impl MpiExecutor<'_> {
+    fn narrowphase_stage(
+        &mut self,
+        objects: &[ObjectDef],
+        tasks: Vec<PairTask>,
+    ) -> Vec<PairResult> {
         let units: Vec<f64> = tasks
             .iter()
             .map(|t| {
@@ -535,7 +570,7 @@ impl Executor for MpiExecutor<'_> {
         results
     }
 
-    fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
+    fn solve_islands_stage(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
         let units: Vec<f64> = tasks
             .iter()
             .map(|t| {
@@ -578,7 +613,7 @@ impl Executor for MpiExecutor<'_> {
         results
     }
 
-    fn step_groups(
+    fn step_groups_stage(
         &mut self,
         st: &StepStatic,
         params: &GroupParams,

@@ -72,6 +72,7 @@ pub trait Executor {
 /// Runs every stage on this rank.
 #[derive(Default)]
 pub struct Inline {
+    clock: stats::StageClock,
     busy_s: f64,
     narrowphase_tasks: u64,
     island_tasks: u64,
@@ -80,6 +81,7 @@ pub struct Inline {
 
 impl Executor for Inline {
     fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
+        self.clock.enter();
         let clock = Instant::now();
         self.narrowphase_tasks += tasks.len() as u64;
         self.dist.narrowphase_local += 1;
@@ -88,14 +90,17 @@ impl Executor for Inline {
             .map(|t| narrowphase::query_pair(objects, t))
             .collect();
         self.busy_s += clock.elapsed().as_secs_f64();
+        self.dist.distributable_s += self.clock.leave();
         r
     }
     fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
+        self.clock.enter();
         let clock = Instant::now();
         self.island_tasks += tasks.len() as u64;
         self.dist.solve_local += 1;
         let r = tasks.iter().map(solver::solve_island).collect();
         self.busy_s += clock.elapsed().as_secs_f64();
+        self.dist.distributable_s += self.clock.leave();
         r
     }
     fn step_groups(
@@ -105,10 +110,14 @@ impl Executor for Inline {
         inputs: Vec<GroupInput>,
     ) -> Vec<GroupReply> {
         // Busy time and tasks are counted by the stages the groups call.
-        inputs
+        self.clock.enter();
+        self.dist.groups_local += 1;
+        let replies = inputs
             .into_iter()
             .map(|input| group::run_group(st, input, self))
-            .collect()
+            .collect();
+        self.dist.distributable_s += self.clock.leave();
+        replies
     }
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
         let me = RankSummary {

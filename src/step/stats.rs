@@ -141,4 +141,55 @@ pub struct Distribution {
     pub groups_distributed: u64,
     pub groups_local: u64,
     pub message_latency_s: f64,
+    /// Wall seconds rank 0 spent inside the stages that go to other ranks
+    /// when there are some (pair tasks, island solves, group steps; the
+    /// outermost only), waiting for replies included.
+    pub distributable_s: f64,
+    /// That share of the run's wall time: the thesis's p (eq. 4.3), on one
+    /// rank the share of the work the cluster can take.
+    pub parallel_fraction: f64,
+    /// 1 / (1 − p): the most any number of ranks can speed the run up.
+    pub amdahl_bound: f64,
+}
+
+impl Distribution {
+    /// Fills in `parallel_fraction` and `amdahl_bound` for a run of `wall_s`.
+    pub fn close(&mut self, wall_s: f64) {
+        let p = if wall_s > 0.0 {
+            (self.distributable_s / wall_s).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.parallel_fraction = p;
+        self.amdahl_bound = 1.0 / (1.0 - p).max(1e-6);
+    }
+}
+
+/// Times the outermost distributable stage: stages called from inside
+/// another (a group step's own pair tasks and solves) are not counted again.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct StageClock {
+    depth: u32,
+    started: Option<std::time::Instant>,
+}
+
+impl StageClock {
+    pub(crate) fn enter(&mut self) {
+        if self.depth == 0 {
+            self.started = Some(std::time::Instant::now());
+        }
+        self.depth += 1;
+    }
+
+    /// Returns the seconds to add (the outermost stage's wall time, else 0).
+    pub(crate) fn leave(&mut self) -> f64 {
+        self.depth -= 1;
+        if self.depth == 0 {
+            self.started
+                .take()
+                .map_or(0.0, |t| t.elapsed().as_secs_f64())
+        } else {
+            0.0
+        }
+    }
 }
