@@ -55,9 +55,8 @@ pub const GROUP_MARGIN: f64 = 0.25;
 pub(crate) struct StepStart {
     pub seg: Vec<Segment>,
     pub end: Vec<BodyState>,
-    /// The broadphase's candidate pairs (sorted) and their end-of-step results.
+    /// The broadphase's candidate pairs (sorted).
     pub pairs: Vec<PairKey>,
-    pub results: Vec<PairResult>,
     /// The predicted paths' swept spheres, tagged with world ids, grown by
     /// `GROUP_MARGIN` (what the groups are formed by).
     pub grown: Vec<SphereProxy>,
@@ -272,11 +271,6 @@ pub(crate) fn group_input(
         seg: ids.iter().map(|&w| start.seg[w as usize]).collect(),
         end: ids.iter().map(|&w| start.end[w as usize]).collect(),
         pairs: plan.pairs.iter().map(|&k| key(start.pairs[k])).collect(),
-        results: plan
-            .pairs
-            .iter()
-            .map(|&k| start.results[k].clone())
-            .collect(),
         since,
         separating,
         together,
@@ -289,8 +283,9 @@ pub(crate) fn group_input(
 pub(crate) struct GroupState {
     pub seg: Vec<Segment>,
     pub end: Vec<BodyState>,
+    /// The group's candidate pairs (their end-of-step narrowphase is the
+    /// group step's first stage).
     pub pairs: Vec<PairKey>,
-    pub results: Vec<PairResult>,
     pub since: SolvedSince,
     pub separating: HashMap<PairKey, Vector3<f64>>,
     pub together: SolvedTogether,
@@ -548,7 +543,6 @@ pub struct GroupInput {
     seg: Vec<Segment>,
     end: Vec<BodyState>,
     pairs: Vec<PairKey>,
-    results: Vec<PairResult>,
     since: Vec<(PairKey, Since)>,
     separating: Vec<(PairKey, Vector3<f64>)>,
     /// Islands solved together at the step's start (local indices).
@@ -660,7 +654,6 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         seg,
         end,
         pairs,
-        results,
         since,
         separating,
         together: islands,
@@ -687,7 +680,6 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         seg,
         end,
         pairs,
-        results,
         since: since.into_iter().collect(),
         separating: separating.into_iter().collect(),
         together,
@@ -716,12 +708,13 @@ pub(crate) fn step_group(
         mut seg,
         mut end,
         pairs,
-        results,
         mut since,
         mut separating,
         together: mut solved_together,
         mut spin_resolves,
     } = s;
+    // narrowphase: the group's pairs at the end of the step.
+    let results = g.narrowphase_skipping_separating(exec, &pairs, &end, &separating);
     let clock = Instant::now();
     let nested_before = g.stage.nested();
     let moving = (0..n)
