@@ -5,8 +5,8 @@
 //! solve_islands   impact impulses + resting/friction forces per island (Dantzig LCP)
 //! integrate       every awake body to the end of the step (constant force)
 //! broadphase      swept bounding spheres → candidate pairs
-//! narrowphase     V-Clip on candidate pairs at the end of the step → contacts, overlaps
 //! build_groups    the moving bodies, split into groups that can reach each other
+//! narrowphase     per group: V-Clip on its pairs at the end of the step → contacts, overlaps
 //! time_of_impact  per group: an overlap rolls back only the bodies that must move
 //!                 with it to the touching instant found by bisection, solves the
 //!                 impact there and re-integrates them; groups whose new paths meet
@@ -15,9 +15,10 @@
 //! ```
 //!
 //! The stages are written over a `Region` (`region`): the whole world for
-//! the first five, one group for its impacts (`group`). The time of impact
-//! itself is `toi`, the contact solve `contact`, resting systems `sleep`,
-//! and what is counted and timed `stats`.
+//! the stages every body takes (`frame`), one group for its narrowphase and
+//! impacts (`group` forms and merges the groups, `impacts` steps one). The
+//! time of impact itself is `toi`, the contact solve `contact`, resting
+//! systems `sleep`, and what is counted and timed `stats`.
 //!
 //! The pure work (V-Clip on pairs, LCP on islands) goes through an
 //! `Executor`: inline on one rank, or scattered over MPI ranks by `cluster`.
@@ -27,6 +28,7 @@
 mod contact;
 mod frame;
 mod group;
+mod impacts;
 mod region;
 mod sleep;
 pub mod stats;
