@@ -60,56 +60,6 @@ pub fn candidate_pairs(
     pairs
 }
 
-/// Candidate pairs after some bodies moved: the pairs of `previous` that
-/// involve no body in `changed` (their spheres did not move) plus every pair
-/// with a changed body, found by testing the changed bodies' boxes against
-/// every body's box and then their spheres. Equal to `candidate_pairs` on the
-/// same proxies when `previous` was computed from proxies that differ only in
-/// the changed bodies, at O(changed · bodies) instead of a full sort: time of
-/// impact rolls back a few bodies at a time, many times a step.
-///
-/// `proxies` must be grouped by body (each body's spheres contiguous), as
-/// the simulator builds them.
-pub fn update_pairs(
-    proxies: &[SphereProxy],
-    previous: &[(u32, u32)],
-    changed: &[bool],
-    keep: impl Fn(u32, u32) -> bool,
-) -> Vec<(u32, u32)> {
-    let is_changed = |b: u32| changed.get(b as usize).copied().unwrap_or(false);
-    let mut pairs: Vec<(u32, u32)> = previous
-        .iter()
-        .copied()
-        .filter(|&(a, b)| !is_changed(a) && !is_changed(b))
-        .collect();
-    let groups = body_groups(proxies);
-    for (gi, ga) in groups.iter().enumerate() {
-        if !is_changed(ga.body) {
-            continue;
-        }
-        for (gj, gb) in groups.iter().enumerate() {
-            // Each pair once: a changed body against the unchanged ones, and
-            // against changed bodies after it.
-            if gi == gj || (is_changed(gb.body) && gj < gi) || !ga.boxes_overlap(gb) {
-                continue;
-            }
-            let hit = proxies[ga.range.clone()].iter().any(|p| {
-                proxies[gb.range.clone()].iter().any(|q| {
-                    let reach = p.radius + q.radius;
-                    (p.center - q.center).norm_squared() <= reach * reach
-                })
-            });
-            let pair = (ga.body.min(gb.body), ga.body.max(gb.body));
-            if hit && keep(pair.0, pair.1) {
-                pairs.push(pair);
-            }
-        }
-    }
-    pairs.sort_unstable();
-    pairs.dedup();
-    pairs
-}
-
 /// Pairs of a sphere of `moving` with one of `fixed`, as (fixed body,
 /// moving body), and pairs among `moving` (as `candidate_pairs` gives them),
 /// together, sorted and without duplicates; two spheres of `fixed` are never
@@ -152,41 +102,6 @@ pub fn crossing_pairs(fixed: &[SphereProxy], moving: &[SphereProxy]) -> Vec<(u32
     pairs.sort_unstable();
     pairs.dedup();
     pairs
-}
-
-/// One body's spheres in the proxy list and the box around them.
-struct BodyGroup {
-    body: u32,
-    range: std::ops::Range<usize>,
-    min: Vector3<f64>,
-    max: Vector3<f64>,
-}
-
-impl BodyGroup {
-    fn boxes_overlap(&self, other: &BodyGroup) -> bool {
-        (0..3).all(|k| self.min[k] <= other.max[k] && other.min[k] <= self.max[k])
-    }
-}
-
-fn body_groups(proxies: &[SphereProxy]) -> Vec<BodyGroup> {
-    let mut groups: Vec<BodyGroup> = Vec::new();
-    for (i, p) in proxies.iter().enumerate() {
-        let r = Vector3::repeat(p.radius);
-        match groups.last_mut() {
-            Some(g) if g.body == p.body => {
-                g.range.end = i + 1;
-                g.min = g.min.inf(&(p.center - r));
-                g.max = g.max.sup(&(p.center + r));
-            }
-            _ => groups.push(BodyGroup {
-                body: p.body,
-                range: i..i + 1,
-                min: p.center - r,
-                max: p.center + r,
-            }),
-        }
-    }
-    groups
 }
 
 /// Brute-force all-pairs reference (tests and tiny scenes).
