@@ -306,6 +306,19 @@ pub struct GroupParams {
 }
 
 impl GroupParams {
+    /// The world's switches for a step starting at `t0`.
+    pub(crate) fn of_world(w: &super::World, t0: f64) -> Self {
+        GroupParams {
+            t0,
+            skip_separating: w.skip_separating,
+            warm_start: w.warm_start,
+            iterative_min_rows: w.iterative_min_rows,
+            sleep_enabled: w.sleep_enabled,
+            sleep_after: w.sleep_after,
+            group_margin: w.group_margin,
+        }
+    }
+
     pub(crate) fn of(st: &StepStatic) -> Self {
         GroupParams {
             t0: st.t0,

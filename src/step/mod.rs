@@ -259,18 +259,7 @@ impl World {
     pub fn step(&mut self, exec: &mut dyn Executor) -> Result<(), NumericalFailure> {
         let t0 = self.time();
         let n = self.bodies.len();
-        let st = StepStatic {
-            objects: &self.scene.objects,
-            settings: &self.scene.settings,
-            forces: &self.scene.forces,
-            t0,
-            skip_separating: self.skip_separating,
-            warm_start: self.warm_start,
-            iterative_min_rows: self.iterative_min_rows,
-            sleep_enabled: self.sleep_enabled,
-            sleep_after: self.sleep_after,
-            group_margin: self.group_margin,
-        };
+        let st = GroupParams::of_world(self, t0).statics(&self.scene);
         use std::mem::take;
         let mut world = Region {
             st: &st,

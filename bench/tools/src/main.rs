@@ -579,23 +579,32 @@ fn scaling(runs: &[Run], out: &Path, md: &mut String) {
     }
 }
 
-/// Series `cores`: `bench/scenes/eight_stacks.toml` (heavy contact solves,
-/// few impact events) on 1 rank and on as many ranks as the machine has
-/// cores, without rendering: what distributing gains where no rank shares a
-/// core. Medians per rank count; the state hash must agree.
-fn real_cores(runs: &[Run], out: &Path, md: &mut String) {
-    let rs: Vec<&Run> = runs.iter().filter(|r| r.series == "cores").collect();
+/// The runs of one real-cores series by rank count, and whether their state
+/// hashes all agree; `None` when the series has no runs.
+fn by_ranks<'a>(runs: &'a [Run], series: &str) -> Option<(BTreeMap<u32, Vec<&'a Run>>, bool)> {
+    let rs: Vec<&Run> = runs.iter().filter(|r| r.series == series).collect();
     if rs.is_empty() {
-        return;
-    }
-    let mut by: BTreeMap<u32, Vec<&Run>> = BTreeMap::new();
-    for r in &rs {
-        by.entry(r.ranks).or_default().push(r);
+        return None;
     }
     let hashes: std::collections::BTreeSet<&str> = rs
         .iter()
         .filter_map(|r| r.s["state_hash"].as_str())
         .collect();
+    let mut by: BTreeMap<u32, Vec<&Run>> = BTreeMap::new();
+    for r in rs {
+        by.entry(r.ranks).or_default().push(r);
+    }
+    Some((by, hashes.len() == 1))
+}
+
+/// Series `cores`: `bench/scenes/eight_stacks.toml` (heavy contact solves,
+/// few impact events) on 1 rank and on as many ranks as the machine has
+/// cores, without rendering: what distributing gains where no rank shares a
+/// core. Medians per rank count; the state hash must agree.
+fn real_cores(runs: &[Run], out: &Path, md: &mut String) {
+    let Some((by, hashes_agree)) = by_ranks(runs, "cores") else {
+        return;
+    };
     let mut csv = String::from(
         "ranks,runs,wall_median_s,worst_frame_median_s,solve_islands_median_s,solve_distributed_share\n",
     );
@@ -628,11 +637,7 @@ fn real_cores(runs: &[Run], out: &Path, md: &mut String) {
     let _ = writeln!(
         md,
         "\nState hashes: {} (must be one).\n",
-        if hashes.len() == 1 {
-            "all equal"
-        } else {
-            "DIFFER"
-        }
+        if hashes_agree { "all equal" } else { "DIFFER" }
     );
     std::fs::write(out.join("cores.csv"), csv).expect("write cores.csv");
 }
@@ -731,7 +736,13 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
         return;
     }
     // A counter the commit did not have yet.
-    let count = |x: f64| if x.is_nan() { "—".to_string() } else { format!("{x:.0}") };
+    let count = |x: f64| {
+        if x.is_nan() {
+            "—".to_string()
+        } else {
+            format!("{x:.0}")
+        }
+    };
     let mut keys: Vec<(u64, String)> = pour.iter().map(|r| (r.bodies, r.variant.clone())).collect();
     keys.sort();
     keys.dedup();
@@ -740,9 +751,19 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
     variants.sort();
     variants.dedup();
     let per_s = |r: &Run, v: f64| v / f(&r.s, &["sim_time_s"]);
-    let med = |rs: &[&Run], g: &dyn Fn(&Run) -> f64| median(&rs.iter().map(|r| g(r)).collect::<Vec<_>>());
-    let stage_names = ["time_of_impact", "solve_islands", "narrowphase", "broadphase", "integrate", "build_islands"];
-    let mut csv = String::from("bodies,commit,runs,simulated_s,ended,wall_s,wall_per_sim_s,outside_solve_per_sim_s,worst_frame_s,toi_events,queries_per_event,groups,largest_group,group_reruns,max_penetration_m,overlaps_accepted");
+    let med =
+        |rs: &[&Run], g: &dyn Fn(&Run) -> f64| median(&rs.iter().map(|r| g(r)).collect::<Vec<_>>());
+    let stage_names = [
+        "time_of_impact",
+        "solve_islands",
+        "narrowphase",
+        "broadphase",
+        "integrate",
+        "build_islands",
+    ];
+    let mut csv = String::from(
+        "bodies,commit,runs,simulated_s,ended,wall_s,wall_per_sim_s,outside_solve_per_sim_s,worst_frame_s,toi_events,queries_per_event,groups,largest_group,group_reruns,max_penetration_m,overlaps_accepted",
+    );
     for n in stage_names {
         let _ = write!(csv, ",{n}_share");
     }
@@ -751,14 +772,32 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
     md.push_str("| bodies | commit | runs | simulated [s] | ended | wall per simulated s | outside solve_islands per simulated s | worst 0.1 s frame [s] | time of impact | solve_islands | narrowphase | broadphase | impact events | queries per event | groups | largest group | group re-runs | deepest overlap [µm] | accepted |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     let mut rows: Vec<(u64, String, f64, f64)> = Vec::new();
     for (bodies, variant) in &keys {
-        let rs: Vec<&Run> = pour.iter().copied().filter(|r| r.bodies == *bodies && &r.variant == variant).collect();
+        let rs: Vec<&Run> = pour
+            .iter()
+            .copied()
+            .filter(|r| r.bodies == *bodies && &r.variant == variant)
+            .collect();
         let wall = med(&rs, &|r| per_s(r, f(&r.s, &["wall_time_s"])));
-        let outside = med(&rs, &|r| per_s(r, f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"])));
-        let share = |k: &str| med(&rs, &|r| f(&r.s, &["stage_seconds", k]) / f(&r.s, &["wall_time_s"]));
+        let outside = med(&rs, &|r| {
+            per_s(
+                r,
+                f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"]),
+            )
+        });
+        let share = |k: &str| {
+            med(&rs, &|r| {
+                f(&r.s, &["stage_seconds", k]) / f(&r.s, &["wall_time_s"])
+            })
+        };
         let c = |k: &str| med(&rs, &|r| f(&r.s, &["counters", k]));
-        let qpe = med(&rs, &|r| f(&r.s, &["counters", "toi_bisection_queries"]) / f(&r.s, &["counters", "toi_events"]).max(1.0));
+        let qpe = med(&rs, &|r| {
+            f(&r.s, &["counters", "toi_bisection_queries"])
+                / f(&r.s, &["counters", "toi_events"]).max(1.0)
+        });
         let sim = med(&rs, &|r| f(&r.s, &["sim_time_s"]));
-        let ended = rs.first().map_or(String::new(), |r| r.s["end_reason"].as_str().unwrap_or("").to_string());
+        let ended = rs.first().map_or(String::new(), |r| {
+            r.s["end_reason"].as_str().unwrap_or("").to_string()
+        });
         let worst = med(&rs, &|r| f(&r.s, &["worst_frame_s"]));
         let pen = med(&rs, &|r| f(&r.s, &["max_penetration_m"]));
         let _ = writeln!(
@@ -802,10 +841,23 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
         md.push_str("Growth over the same simulated window (the largest pour against 200 bodies), wall seconds outside `solve_islands`:\n\n| commit | 200 bodies [s] | ");
         let _ = write!(md, "{big} bodies [s] | ratio |\n|---|---|---|---|\n");
         for v in &variants {
-            let outside = |rs: Vec<&Run>| med(&rs, &|r| f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"]));
+            let outside = |rs: Vec<&Run>| {
+                med(&rs, &|r| {
+                    f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"])
+                })
+            };
             let small = outside(window.iter().copied().filter(|r| &r.variant == v).collect());
-            let large = outside(pour.iter().copied().filter(|r| &r.variant == v && r.bodies == big).collect());
-            let _ = writeln!(md, "| {v} | {small:.2} | {large:.2} | {:.1} |", large / small);
+            let large = outside(
+                pour.iter()
+                    .copied()
+                    .filter(|r| &r.variant == v && r.bodies == big)
+                    .collect(),
+            );
+            let _ = writeln!(
+                md,
+                "| {v} | {small:.2} | {large:.2} | {:.1} |",
+                large / small
+            );
         }
         md.push('\n');
     }
@@ -815,7 +867,11 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
             .iter()
             .map(|v| plot::Series {
                 label: v.clone(),
-                points: rows.iter().filter(|r| &r.1 == v).map(|r| (r.0 as f64, pick(r))).collect(),
+                points: rows
+                    .iter()
+                    .filter(|r| &r.1 == v)
+                    .map(|r| (r.0 as f64, pick(r)))
+                    .collect(),
                 thin: false,
             })
             .collect()
@@ -840,33 +896,41 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
             ..Default::default()
         },
     ];
-    if let Err(e) = plot::draw(&out.join("pours.png"), "Pours of nuts and bolts, one rank", &panels, 2) {
+    if let Err(e) = plot::draw(
+        &out.join("pours.png"),
+        "Pours of nuts and bolts, one rank",
+        &panels,
+        2,
+    ) {
         eprintln!("report: {e}");
     }
-    std::fs::write(out.join("pours.md"), md.split("## Pours").nth(1).map(|t| format!("## Pours{t}")).unwrap_or_default())
-        .expect("write pours.md");
+    std::fs::write(
+        out.join("pours.md"),
+        md.split("## Pours")
+            .nth(1)
+            .map(|t| format!("## Pours{t}"))
+            .unwrap_or_default(),
+    )
+    .expect("write pours.md");
 }
 
 /// The 200-body pour on 1 rank and on every core (series `cores_pour`):
 /// medians of wall time and worst frame, the share of steps whose group
 /// steps were distributed, and the hash check; `cores_pour.csv`.
 fn real_cores_pour(runs: &[Run], out: &Path, md: &mut String) {
-    let rs: Vec<&Run> = runs.iter().filter(|r| r.series == "cores_pour").collect();
-    if rs.is_empty() {
+    let Some((by, hashes_agree)) = by_ranks(runs, "cores_pour") else {
         return;
-    }
-    let mut by: BTreeMap<u32, Vec<&Run>> = BTreeMap::new();
-    for r in &rs {
-        by.entry(r.ranks).or_default().push(r);
-    }
-    let hashes: std::collections::BTreeSet<&str> = rs
-        .iter()
-        .filter_map(|r| r.s["state_hash"].as_str())
-        .collect();
-    let one = by
-        .get(&1)
-        .map(|rs| median(&rs.iter().map(|r| f(&r.s, &["wall_time_s"])).collect::<Vec<_>>()));
-    let mut csv = String::from("ranks,runs,wall_median_s,wall_over_one_rank,worst_frame_median_s,groups_distributed_share\n");
+    };
+    let one = by.get(&1).map(|rs| {
+        median(
+            &rs.iter()
+                .map(|r| f(&r.s, &["wall_time_s"]))
+                .collect::<Vec<_>>(),
+        )
+    });
+    let mut csv = String::from(
+        "ranks,runs,wall_median_s,wall_over_one_rank,worst_frame_median_s,groups_distributed_share\n",
+    );
     md.push_str("## Distribution on real cores: the 200-body pour, no rendering\n\n");
     md.push_str("| ranks | runs | wall [s] | against 1 rank | worst frame [ms] | steps with group steps distributed |\n|---|---|---|---|---|---|\n");
     for (ranks, rs) in &by {
@@ -878,7 +942,11 @@ fn real_cores_pour(runs: &[Run], out: &Path, md: &mut String) {
             d / (d + f(s, &["distributed", "groups_local"])).max(1.0)
         });
         let ratio = one.map_or(f64::NAN, |o| wall / o);
-        let _ = writeln!(csv, "{ranks},{},{wall:e},{ratio:.4},{worst:e},{share:.4}", rs.len());
+        let _ = writeln!(
+            csv,
+            "{ranks},{},{wall:e},{ratio:.4},{worst:e},{share:.4}",
+            rs.len()
+        );
         let _ = writeln!(
             md,
             "| {ranks} | {} | {wall:.3} | {ratio:.2} | {:.1} | {:.0} % |",
@@ -890,7 +958,7 @@ fn real_cores_pour(runs: &[Run], out: &Path, md: &mut String) {
     let _ = writeln!(
         md,
         "\nState hashes: {} (must be one).\n",
-        if hashes.len() == 1 { "all equal" } else { "DIFFER" }
+        if hashes_agree { "all equal" } else { "DIFFER" }
     );
     std::fs::write(out.join("cores_pour.csv"), csv).expect("write cores_pour.csv");
 }
