@@ -889,7 +889,7 @@ impl SeparatingAxis {
 /// it by this fraction of the smaller polyhedron's size to be chosen: at
 /// equal overlap, face axes give stable face contacts, and nearly parallel
 /// edge pairs only reproduce face normals. Edge axes in other directions
-/// need only beat it (since session 9).
+/// need only beat it (since 34c71c7).
 pub const EDGE_AXIS_REL_BIAS: f64 = 1e-6;
 
 /// Separating-axis test over the face normals of both polyhedra and the
