@@ -3,7 +3,9 @@
 
 use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
-use rigidsim::collision::broadphase::{SphereProxy, candidate_pairs, candidate_pairs_brute_force};
+use rigidsim::collision::broadphase::{
+    SphereProxy, candidate_pairs, candidate_pairs_brute_force, crossing_pairs,
+};
 
 fn random_scene(bodies: u32, seed: u64, spread: f64) -> Vec<SphereProxy> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -31,6 +33,93 @@ fn sort_and_sweep_equals_brute_force_on_random_scenes_of_1000_bodies() {
         assert_eq!(fast, slow, "seed {seed}, spread {spread}");
         assert!(!fast.is_empty());
     }
+}
+
+/// Bodies of many spheres each (a nut's ring of parts, a bolt's head and
+/// shaft), given in no particular order, with one large sphere among them
+/// (a floor): the enclosing spheres of the first level must not lose a
+/// pair the sphere-by-sphere check finds.
+#[test]
+fn bodies_of_many_spheres_in_any_order_give_the_brute_force_pairs() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut proxies = Vec::new();
+    for body in 0..150 {
+        let centre = Vector3::from_fn(|_, _| rng.random::<f64>() * 0.2);
+        let count = rng.random_range(1..=40);
+        for k in 0..count {
+            let angle = k as f64 * std::f64::consts::TAU / count as f64;
+            let ring = Vector3::new(angle.cos(), angle.sin(), 0.0) * 0.02;
+            proxies.push(SphereProxy {
+                body,
+                center: centre + ring,
+                radius: 0.002 + rng.random::<f64>() * 0.01,
+            });
+        }
+    }
+    proxies.push(SphereProxy {
+        body: 150,
+        center: Vector3::new(0.1, 0.1, -1.0),
+        radius: 1.05,
+    });
+    // Shuffle, so that one body's spheres are scattered through the list.
+    for i in (1..proxies.len()).rev() {
+        proxies.swap(i, rng.random_range(0..=i));
+    }
+    let fast = candidate_pairs(&proxies, |_, _| true);
+    assert_eq!(fast, candidate_pairs_brute_force(&proxies, |_, _| true));
+    assert!(
+        fast.len() > 300,
+        "{} pairs: the scene must be crowded",
+        fast.len()
+    );
+    assert!(fast.iter().any(|&(_, b)| b == 150));
+}
+
+/// The leak check's pairs: every moving sphere against a crowd of bodies
+/// of many spheres (and a floor), plus the pairs among the moving ones,
+/// exactly as sphere by sphere.
+#[test]
+fn crossing_pairs_equal_the_sphere_by_sphere_pairs() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+    let mut ring = |body: u32, count: usize, spread: f64| -> Vec<SphereProxy> {
+        let centre = Vector3::from_fn(|_, _| rng.random::<f64>() * spread);
+        (0..count)
+            .map(|k| {
+                let angle = k as f64 * std::f64::consts::TAU / count as f64;
+                SphereProxy {
+                    body,
+                    center: centre + Vector3::new(angle.cos(), 0.0, angle.sin()) * 0.02,
+                    radius: 0.003 + 0.008 * (k % 3) as f64,
+                }
+            })
+            .collect()
+    };
+    let mut fixed: Vec<SphereProxy> = (0..200)
+        .flat_map(|b| ring(b, 1 + b as usize % 37, 0.3))
+        .collect();
+    fixed.push(SphereProxy {
+        body: 200,
+        center: Vector3::new(0.15, 0.15, -1.0),
+        radius: 1.02,
+    });
+    let moving: Vec<SphereProxy> = (0..30).flat_map(|b| ring(300 + b, 5, 0.3)).collect();
+    let mut expected = candidate_pairs_brute_force(&moving, |_, _| true);
+    for f in &fixed {
+        for m in &moving {
+            let reach = f.radius + m.radius;
+            if (f.center - m.center).norm_squared() <= reach * reach {
+                expected.push((f.body, m.body));
+            }
+        }
+    }
+    expected.sort_unstable();
+    expected.dedup();
+    assert!(
+        expected.len() > 40,
+        "{} pairs: the scene must be crowded",
+        expected.len()
+    );
+    assert_eq!(crossing_pairs(&fixed, &moving), expected);
 }
 
 #[test]
