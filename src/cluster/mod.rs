@@ -167,14 +167,88 @@ const REPLY_DEADLINE: Duration = Duration::from_secs(10);
 
 /// Share of its speed that rank 0 plans for itself (it also packs and merges).
 const COORDINATOR_SHARE: f64 = 0.5;
-/// The same for group steps: a group's input and output are packed once,
-/// and rank 0 steps its own groups while the workers step theirs (requests
-/// posted first, replies gathered after), so it counts at its full speed.
+/// The same for group steps, when deciding whether to distribute them: a
+/// group's input and output are packed once, and rank 0 steps groups while
+/// the workers step theirs (`self_schedule`), so it counts at full speed.
 const COORDINATOR_SHARE_GROUPS: f64 = 1.0;
+/// Chunks of group steps a worker holds at most: the one it steps and the
+/// next, so it never waits for rank 0 between them.
+const CHUNKS_IN_FLIGHT: usize = 1;
+/// A chunk holds at least this share of the work not yet handed out,
+/// divided by the ranks taking part (guided self-scheduling): large chunks
+/// while much is left, few messages; small ones at the end, where an
+/// estimate that was off could leave a rank waiting.
+const CHUNK_SHARE: f64 = 0.5;
 
-/// Rank 0's executor: decides per stage and per frame whether to distribute,
-/// assigns tasks by cost, sends one message to each worker, does its own
-/// share, gathers, and merges results in task order.
+/// A request on its way to a worker, sent without blocking: MPI reads the
+/// buffer until the send completes, so it is freed only then (`reap_posts`).
+struct Posted {
+    request: Request<'static, [u8], StaticScope>,
+    buffer: *mut [u8],
+    rank: i32,
+    since: Instant,
+}
+
+/// The tasks of one self-scheduled stage, largest first: workers take
+/// chunks from the front, rank 0 one task at a time from the back.
+struct Feed {
+    order: Vec<usize>,
+    front: usize,
+    back: usize,
+    /// Estimated seconds not yet handed out.
+    left_s: f64,
+}
+
+impl Feed {
+    fn new(costs: &[f64]) -> Self {
+        let mut order: Vec<usize> = (0..costs.len()).collect();
+        order.sort_by(|&i, &j| costs[j].total_cmp(&costs[i]).then(i.cmp(&j)));
+        Feed {
+            front: 0,
+            back: order.len(),
+            order,
+            left_s: costs.iter().sum(),
+        }
+    }
+
+    /// The next chunk for a worker: the largest tasks left, at least one,
+    /// up to `CHUNK_SHARE` of what is left per rank.
+    fn chunk(&mut self, costs: &[f64], ranks: usize) -> Option<Vec<usize>> {
+        if self.front == self.back {
+            return None;
+        }
+        let target = CHUNK_SHARE * self.left_s / ranks as f64;
+        let mut chunk = Vec::new();
+        let mut cost = 0.0;
+        while self.front < self.back
+            && (chunk.is_empty() || cost + costs[self.order[self.front]] <= target)
+        {
+            let i = self.order[self.front];
+            cost += costs[i];
+            chunk.push(i);
+            self.front += 1;
+        }
+        self.left_s -= cost;
+        Some(chunk)
+    }
+
+    /// The next task for rank 0: the smallest left.
+    fn own(&mut self, costs: &[f64]) -> Option<usize> {
+        if self.front == self.back {
+            return None;
+        }
+        self.back -= 1;
+        let i = self.order[self.back];
+        self.left_s -= costs[i];
+        Some(i)
+    }
+}
+
+/// Rank 0's executor: decides per stage and per frame whether to distribute;
+/// pair tasks by the thesis's greedy plan (one message to each worker, its
+/// own share, gather), island solves and group steps by self-scheduling
+/// (chunks handed out as workers answer, rank 0 taking the smallest tasks
+/// in between); results merged in task order either way.
 pub struct MpiExecutor<'w> {
     world: &'w SimpleCommunicator,
     roles: Roles,
@@ -417,6 +491,172 @@ impl<'w> MpiExecutor<'w> {
         (results, total_busy, own)
     }
 
+    /// Sends `req` to `rank` without waiting for it to be received.
+    fn post(&mut self, rank: i32, req: &Req, posted: &mut Vec<Posted>) {
+        let bytes = encode(req).into_boxed_slice();
+        let slot = self.slot_of(rank);
+        self.book[slot].bytes_sent += bytes.len() as u64;
+        let buffer: *mut [u8] = Box::into_raw(bytes);
+        // SAFETY: `buffer` stays allocated until the request completes
+        // (`reap_posts` frees it then, and only then).
+        let data: &'static [u8] = unsafe { &*buffer };
+        let request = self.world.process_at_rank(rank).immediate_send_with_tag(
+            StaticScope,
+            data,
+            protocol::TAG_REQUEST,
+        );
+        posted.push(Posted {
+            request,
+            buffer,
+            rank,
+            since: Instant::now(),
+        });
+    }
+
+    /// Completes the sends that are done and frees their buffers; with
+    /// `all`, waits for every one (a worker that never takes its request is
+    /// lost, as in `send`).
+    fn reap_posts(&self, posted: &mut Vec<Posted>, all: bool) {
+        let mut spins = 0u32;
+        loop {
+            let mut still = Vec::new();
+            for p in posted.drain(..) {
+                match p.request.test() {
+                    // SAFETY: leaked from a Box in `post`; MPI is done with it.
+                    Ok(_) => drop(unsafe { Box::from_raw(p.buffer) }),
+                    Err(request) => {
+                        if p.since.elapsed() > REPLY_DEADLINE {
+                            self.lost(p.rank);
+                        }
+                        still.push(Posted { request, ..p });
+                    }
+                }
+            }
+            *posted = still;
+            if !all || posted.is_empty() {
+                return;
+            }
+            spins += 1;
+            pause(spins);
+        }
+    }
+
+    /// Scatter–compute–gather by self-scheduling (for group steps, whose
+    /// costs are predictions from the last step and often off): the tasks
+    /// sorted largest first, each worker holds up to `CHUNKS_IN_FLIGHT`
+    /// chunks from the front and gets the next when it answers, and rank 0
+    /// steps single tasks from the back in between, so no rank waits while
+    /// work is left. Results are merged by task index, never by arrival
+    /// order or by where a task ran. Returns the results and rank 0's tasks.
+    fn self_schedule<T, R>(
+        &mut self,
+        workers: usize,
+        tasks: Vec<T>,
+        costs: &[f64],
+        make: impl Fn(Vec<T>) -> Req,
+        local: impl Fn(T) -> R,
+        unpack: impl Fn(Reply) -> Option<(Vec<R>, f64)>,
+    ) -> (Vec<R>, f64, Vec<usize>) {
+        let used = schedule::fastest_slots(&self.speeds, workers);
+        let slots: Vec<usize> = (1..self.speeds.len()).filter(|&s| used[s]).collect();
+        let ranks = slots.len() + 1;
+        let mut feed = Feed::new(costs);
+        let mut tasks: Vec<Option<T>> = tasks.into_iter().map(Some).collect();
+        let mut results: Vec<Option<R>> = (0..tasks.len()).map(|_| None).collect();
+        let mut held: Vec<VecDeque<Vec<usize>>> = vec![VecDeque::new(); slots.len()];
+        let mut posted = Vec::new();
+        let mut own = Vec::new();
+        let (mut own_s, mut own_cost, mut total_busy) = (0.0, 0.0, 0.0);
+        // Hands worker `k` chunks until it holds `CHUNKS_IN_FLIGHT`.
+        macro_rules! refill {
+            ($k:expr) => {
+                while held[$k].len() < CHUNKS_IN_FLIGHT {
+                    let Some(chunk) = feed.chunk(costs, ranks) else {
+                        break;
+                    };
+                    let share: Vec<T> = chunk
+                        .iter()
+                        .map(|&i| tasks[i].take().expect("handed out once"))
+                        .collect();
+                    let cost: f64 = chunk.iter().map(|&i| costs[i]).sum();
+                    self.book[slots[$k]].cost_s += cost;
+                    let rank = self.roles.workers[slots[$k] - 1];
+                    self.post(rank, &make(share), &mut posted);
+                    held[$k].push_back(chunk);
+                }
+            };
+        }
+        // Takes worker `k`'s answer to its oldest chunk.
+        macro_rules! take_reply {
+            ($k:expr) => {{
+                let chunk = held[$k].pop_front().expect("a chunk is held");
+                let rank = self.roles.workers[slots[$k] - 1];
+                let Some((rs, busy)) = unpack(self.receive(rank)) else {
+                    eprintln!("rigidsim: rank 0: rank {rank} answered the wrong message");
+                    self.world.abort(4);
+                };
+                if rs.len() != chunk.len() {
+                    eprintln!(
+                        "rigidsim: rank 0: rank {rank} returned {} results for {} tasks",
+                        rs.len(),
+                        chunk.len()
+                    );
+                    self.world.abort(4);
+                }
+                let cost: f64 = chunk.iter().map(|&i| costs[i]).sum();
+                self.book[slots[$k]].busy_s += busy;
+                total_busy += busy;
+                self.meter(slots[$k], cost, busy);
+                for (r, i) in rs.into_iter().zip(chunk) {
+                    results[i] = Some(r);
+                }
+            }};
+        }
+        for k in 0..slots.len() {
+            refill!(k);
+        }
+        loop {
+            for k in 0..slots.len() {
+                let rank = self.roles.workers[slots[k] - 1];
+                while !held[k].is_empty()
+                    && self
+                        .world
+                        .process_at_rank(rank)
+                        .immediate_probe_with_tag(protocol::TAG_REPLY)
+                        .is_some()
+                {
+                    take_reply!(k);
+                    refill!(k);
+                }
+            }
+            self.reap_posts(&mut posted, false);
+            let Some(i) = feed.own(costs) else { break };
+            let clock = Instant::now();
+            results[i] = Some(local(tasks[i].take().expect("handed out once")));
+            own_s += clock.elapsed().as_secs_f64();
+            own_cost += costs[i];
+            own.push(i);
+        }
+        // Everything is handed out: gather what the workers still hold.
+        let wait = Instant::now();
+        for k in 0..slots.len() {
+            while !held[k].is_empty() {
+                take_reply!(k);
+            }
+        }
+        self.reap_posts(&mut posted, true);
+        self.book[0].busy_s += own_s;
+        self.book[0].cost_s += own_cost;
+        self.book[0].waiting_s += wait.elapsed().as_secs_f64();
+        self.meter(0, own_cost, own_s);
+        own.sort_unstable();
+        let results = results
+            .into_iter()
+            .map(|r| r.expect("every task answered"))
+            .collect();
+        (results, total_busy + own_s, own)
+    }
+
     /// Updates a slot's speed from its batches (see `SpeedMeter`). The cost
     /// model is calibrated on all ranks' time together, so speeds average
     /// about 1 and a rank's share follows its speed alone.
@@ -596,13 +836,12 @@ impl MpiExecutor<'_> {
             return r;
         }
         self.dist.solve_distributed += 1;
-        let (results, total_busy, own_tasks) = self.distribute(
+        let (results, total_busy, own_tasks) = self.self_schedule(
             workers,
-            COORDINATOR_SHARE,
             tasks,
             &costs,
             |share| Req::SolveIslands { tasks: share },
-            |own| own.iter().map(solver::solve_island).collect(),
+            |own| solver::solve_island(&own),
             |reply| match reply {
                 Reply::SolveIslands { results, busy_s } => Some((results, busy_s)),
                 _ => None,
@@ -634,27 +873,20 @@ impl MpiExecutor<'_> {
                 .collect();
         }
         self.dist.groups_distributed += 1;
-        let (replies, total_busy, own) = self.distribute(
+        let (replies, _, own) = self.self_schedule(
             workers,
-            COORDINATOR_SHARE_GROUPS,
             inputs,
             &costs,
             |share| Req::StepGroups {
                 params: params.clone(),
                 inputs: share,
             },
-            |own| {
-                let mut inline = Inline::default();
-                own.iter()
-                    .map(|input| run_group(st, input.clone(), &mut inline))
-                    .collect()
-            },
+            |input| run_group(st, input, &mut Inline::default()),
             |reply| match reply {
                 Reply::StepGroups { replies, busy_s } => Some((replies, busy_s)),
                 _ => None,
             },
         );
-        let _ = total_busy;
         for &i in &own {
             let (pairs, islands) = replies[i].tasks();
             self.book[0].tasks_np += pairs;

@@ -1,6 +1,8 @@
-//! Every message that crosses ranks (SPEC 3.4). At most one message to each
-//! worker and one back per distributed stage, plus one to the render rank per
-//! frame. Bodies travel as ids and changing state only: every rank loaded the
+//! Every message that crosses ranks (SPEC 3.4). Per distributed stage, one
+//! message to each worker and one back for pair tasks; for island solves
+//! and group steps a few chunks each way (rank 0 hands out the next chunk
+//! as a worker answers, `MpiExecutor::self_schedule`); plus one to the
+//! render rank per frame. Bodies travel as ids and changing state only: every rank loaded the
 //! scene, so shapes and masses never travel. Encoded with bincode.
 
 use crate::collision::narrowphase::{PairResult, PairTask};
@@ -24,12 +26,14 @@ pub enum Request {
     /// `narrowphase` stage: V-Clip on these body pairs (poses and cached
     /// feature ids included). Collision request of the thesis.
     Narrowphase { tasks: Vec<PairTask> },
-    /// `solve_islands` stage: these contact systems. Contact request.
+    /// `solve_islands` stage: these contact systems (one chunk of the
+    /// stage's; the next comes when this one is answered). Contact request.
     SolveIslands { tasks: Vec<IslandTask> },
-    /// `time_of_impact` stage: these interaction groups, each stepped
-    /// whole (`step::run_group`: its end-of-step results, impact events,
-    /// re-solves), with the step's start time and switches. The worker
-    /// runs their narrowphase batches and island solves itself.
+    /// `time_of_impact` stage: these interaction groups (one chunk of the
+    /// stage's, largest first), each stepped whole (`step::run_group`: its
+    /// end-of-step results, impact events, re-solves), with the step's
+    /// start time and switches. The worker runs their narrowphase batches
+    /// and island solves itself.
     StepGroups {
         params: GroupParams,
         inputs: Vec<GroupInput>,
