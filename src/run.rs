@@ -629,7 +629,7 @@ pub fn run_coordinator(
     notes.extend(frame_notes);
     world.stage.render += clock.elapsed().as_secs_f64();
     let (mut per_rank, mut distributed) = exec.finish();
-    distributed.close(wall);
+    distributed.close(wall, world.group_work());
     per_rank.extend(frames.rank_summary());
     world.stage.communication = per_rank.first().map_or(0.0, |r| r.waiting_s);
     for (size, e) in world.counters.solve.failures.iter().take(5) {

@@ -629,7 +629,7 @@ fn render_rank_draws_every_frame_with_three_ranks() {
 /// idle or with another job on the second core). Its ends still mean
 /// something: near 0 the slowed rank is starved; above 0.6 the scheduler
 /// barely reacts (two equal workers give about 1, checked below). The floor
-/// was 0.1 until session 9: one CI run beside a 1000-body pour measured 0.099,
+/// was 0.1 before: one CI run beside a 1000-body pour measured 0.099,
 /// when the stall still counted wall time and multiplied preemption spikes.
 const SLOW_SHARE_BAND: (f64, f64) = (0.05, 0.6);
 
@@ -973,5 +973,17 @@ fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
     assert!(
         (bound - 1.0 / (1.0 - p)).abs() <= 1e-9 * bound,
         "bound {bound} for p = {p}"
+    );
+    // The group steps run inside that time; the largest group's share of
+    // them is a share (one group a step would make it 1).
+    let groups = d["group_s"].as_f64().unwrap();
+    let largest = d["largest_group_share"].as_f64().unwrap();
+    assert!(
+        groups > 0.0 && groups <= inside,
+        "group steps {groups} s of {inside} s"
+    );
+    assert!(
+        largest > 0.0 && largest < 1.0,
+        "largest group's share {largest}"
     );
 }

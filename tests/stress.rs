@@ -26,7 +26,7 @@ const G: f64 = 9.81;
 /// How far the top of the iteratively solved stack of twenty may sink and
 /// sway in 2 s, warm-started or from zero: 1 µm, as the exact method's
 /// stacks are held (`check_stack`); 0.10 µm and 0.04 µm measured since the
-/// subspace step (session 5). Before it, sweeps alone sank it 2.9 µm
+/// subspace step. Before it, sweeps alone sank it 2.9 µm
 /// warm-started and 25.8 µm from zero, and it swayed about 3 mm.
 const ITERATIVE_SINK: f64 = 1e-6;
 const ITERATIVE_SWAY: f64 = 1e-6;
@@ -813,8 +813,9 @@ fn box_pushed_into_a_corner_stays_there() {
 /// A bolt standing on the end of its shaft and wobbling on the end's
 /// 40-gon rim, each rim corner landing in turn: body 140 of the 1000-body
 /// floor pour at b405307, at 8 s, alone on the floor with its speed ×1.3.
-/// Until session 7 a corner landing on a pair already overlapping was let
-/// sink as deep as the pair's deepest point before its impact was placed,
+/// Before 969fac5 (a new contact point's impact is placed where it lands)
+/// a corner landing on a pair already overlapping was let sink as deep as
+/// the pair's deepest point before its impact was placed,
 /// and the overlap recovery then lifted it out again, a pump: at be8ea3e
 /// this bolt still wobbled at 20 s, its energy climbing 1.03e-4 J back over
 /// its lowest so far (1.14e-5 J in one step). Now each corner's impact is

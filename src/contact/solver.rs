@@ -908,8 +908,8 @@ fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -
 /// cube of the rows, and on redundant systems this large its friction
 /// passes often cycle and fail: the stack of 50 (600–800 rows) failed 100
 /// solves in 5 s and took 242 s, the pyramid (about 300 rows) needed 156
-/// compliant retries and 28 s (5 s of each). Solved iteratively since
-/// session 5 they take 0.6 s and 1.5 s, with no failure and the tops within
+/// compliant retries and 28 s (5 s of each). Solved iteratively (with the
+/// subspace step) they take 0.6 s and 1.5 s, with no failure and the tops within
 /// 1.2 µm and 8 nm of where they started. Below this the exact method stays: it has no
 /// compliance and no tolerance, and small systems are cheap for it.
 /// (The history, from 1000 rows down, is in docs/stability.md.)

@@ -4,7 +4,7 @@
 use super::contact::{SpinResolves, Touching};
 use super::group::{self, GroupOutput, StepStart};
 use super::region::{PairKey, Region, Segment};
-use super::stats::NumericalFailure;
+use super::stats::{GroupWork, NumericalFailure};
 use super::toi::{Since, SolvedSince};
 use super::{Executor, check_states};
 use crate::body::{Activity, BodyId, BodyState};
@@ -22,7 +22,7 @@ pub(super) fn step_world(
     exec: &mut dyn Executor,
     max_penetration: &mut f64,
     steps: &mut u64,
-    body_cost: &mut Vec<f64>,
+    work: &mut GroupWork,
 ) -> Result<(), NumericalFailure> {
     let (h, t0) = (w.st.settings.dt, w.st.t0);
     w.wake_for_forces(t0, h);
@@ -52,18 +52,20 @@ pub(super) fn step_world(
         together: solved.together,
         spin_resolves: solved.spin_resolves,
         touching: start_touching.iter().map(|t| (t.a.0, t.b.0)).collect(),
-        body_cost: std::mem::take(body_cost),
+        body_cost: std::mem::take(&mut work.body_cost),
     };
     let (runs, reruns) = group::step_groups(w.st, w, &start, exec)?;
-    *body_cost = start.body_cost.clone();
+    work.body_cost = start.body_cost.clone();
     for g in &runs {
         let members = g.bodies.iter().filter(|b| b.is_dynamic()).count().max(1);
         for (b, &id) in g.bodies.iter().zip(&g.ids) {
             if b.is_dynamic() {
-                body_cost[id as usize] = g.busy_s / members as f64;
+                work.body_cost[id as usize] = g.busy_s / members as f64;
             }
         }
     }
+    work.seconds += runs.iter().map(|g| g.busy_s).sum::<f64>();
+    work.largest_seconds += runs.iter().map(|g| g.busy_s).fold(0.0, f64::max);
     let merged = merge_groups(w, runs, reruns);
     w.stage.time_of_impact += clock.elapsed().as_secs_f64() - merged.nested;
     // Commit the end states, the contacts touching now and the caches.

@@ -50,7 +50,7 @@ use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
 use region::Region;
-use stats::{Distribution, RankSummary};
+use stats::{Distribution, GroupWork, RankSummary};
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
@@ -178,9 +178,9 @@ pub struct World {
     /// Contacts of the impacts solved during the last step, for the
     /// separating-pair skip (only an optimisation: not checkpointed).
     impacts: Vec<Touching>,
-    /// Seconds each body's group step took last step (the schedule's
-    /// prediction of the next; never part of a result, not checkpointed).
-    body_cost: Vec<f64>,
+    /// What the group steps cost (the schedule's prediction; never part of
+    /// a result, not checkpointed).
+    group_work: GroupWork,
     pub(crate) features: HashMap<(u32, u32), Vec<CachedFeatures>>,
     pub(crate) sleep_timer: Vec<f64>,
     /// Resting system a sleeping body belongs to (its lowest body id).
@@ -212,7 +212,7 @@ impl World {
             group_margin: group::GROUP_MARGIN,
             touching: Vec::new(),
             impacts: Vec::new(),
-            body_cost: vec![0.0; n],
+            group_work: GroupWork::new(n),
             features: HashMap::new(),
             sleep_timer: vec![0.0; n],
             sleep_group: (0..n as u32).collect(),
@@ -220,6 +220,11 @@ impl World {
             last_pair_forces: Vec::new(),
             warm: BTreeMap::new(),
         }
+    }
+
+    /// What the run's group steps have cost so far.
+    pub fn group_work(&self) -> &GroupWork {
+        &self.group_work
     }
 
     pub fn time(&self) -> f64 {
@@ -282,7 +287,7 @@ impl World {
             exec,
             &mut self.max_penetration,
             &mut self.steps,
-            &mut self.body_cost,
+            &mut self.group_work,
         );
         // Back into the world, also after a numerical failure (the run
         // keeps what it has: the states are those before the failing stage).

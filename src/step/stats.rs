@@ -150,11 +150,43 @@ pub struct Distribution {
     pub parallel_fraction: f64,
     /// 1 / (1 − p): the most any number of ranks can speed the run up.
     pub amdahl_bound: f64,
+    /// Seconds the group steps took, each counted where it ran.
+    pub group_s: f64,
+    /// Of those, the share in each step's largest group (summed over the
+    /// steps): groups do not split, so no number of ranks takes the group
+    /// stage below this share of its one-rank time.
+    pub largest_group_share: f64,
+}
+
+/// What the group steps cost: each body's share of its group's time in the
+/// last step (the schedule's prediction of the next), and the run's totals
+/// for `Distribution`. Never part of a result; not checkpointed.
+#[derive(Clone, Debug, Default)]
+pub struct GroupWork {
+    pub body_cost: Vec<f64>,
+    pub seconds: f64,
+    pub largest_seconds: f64,
+}
+
+impl GroupWork {
+    pub fn new(bodies: usize) -> Self {
+        GroupWork {
+            body_cost: vec![0.0; bodies],
+            ..Default::default()
+        }
+    }
 }
 
 impl Distribution {
-    /// Fills in `parallel_fraction` and `amdahl_bound` for a run of `wall_s`.
-    pub fn close(&mut self, wall_s: f64) {
+    /// Fills in `parallel_fraction`, `amdahl_bound` and the group work for
+    /// a run of `wall_s`.
+    pub fn close(&mut self, wall_s: f64, groups: &GroupWork) {
+        self.group_s = groups.seconds;
+        self.largest_group_share = if groups.seconds > 0.0 {
+            groups.largest_seconds / groups.seconds
+        } else {
+            0.0
+        };
         let p = if wall_s > 0.0 {
             (self.distributable_s / wall_s).clamp(0.0, 1.0)
         } else {
