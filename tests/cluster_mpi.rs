@@ -333,6 +333,13 @@ fn state_hash_and_trajectory_are_identical_on_1_2_3_and_5_ranks() {
             "{}: no group step was distributed",
             other.what
         );
+        // Forced, every group with a pair per rank has its first stage cut
+        // into ranges first (`PreparePairs`), as a pile's would be.
+        assert!(
+            other.count(&["distributed", "groups_prepared"]) > 0,
+            "{}: no group's first stage went out in ranges",
+            other.what
+        );
         assert!(
             other.per_rank()[1..]
                 .iter()

@@ -8,7 +8,7 @@
 use crate::collision::narrowphase::{PairResult, PairTask};
 use crate::contact::solver::{IslandResult, IslandTask};
 use crate::run::Frame;
-use crate::step::{GroupInput, GroupParams, GroupReply};
+use crate::step::{GroupInput, GroupParams, GroupReply, PreparedPairs};
 use serde::{Deserialize, Serialize};
 
 /// Rank 0 → worker requests.
@@ -38,6 +38,14 @@ pub enum Request {
         params: GroupParams,
         inputs: Vec<GroupInput>,
     },
+    /// `time_of_impact` stage, before `StepGroups` in a step with a group
+    /// too large to share out whole: the first stage (end-of-step results
+    /// and times of impact, `step::prepare_pairs`) of these ranges of its
+    /// pairs. The group then goes out whole with all its answers.
+    PreparePairs {
+        params: GroupParams,
+        shares: Vec<(GroupInput, (usize, usize))>,
+    },
     /// Start-up latency probe: the worker answers `Pong` at once.
     Ping,
     /// End of run: the worker answers `Report` and exits.
@@ -59,6 +67,11 @@ pub enum Reply {
     /// One answer per group of the request, in its order.
     StepGroups {
         replies: Vec<GroupReply>,
+        busy_s: f64,
+    },
+    /// One answer per share of the request, in its order.
+    PreparePairs {
+        prepared: Vec<PreparedPairs>,
         busy_s: f64,
     },
     Pong,

@@ -24,12 +24,12 @@
 //! Repeated until nothing new meets, so every meeting is handled as if the
 //! group had been one from the start, whatever the number of ranks.
 
-use super::Executor;
 use super::contact::{SolvedTogether, SpinResolves, Touching, WarmContact};
 use super::impacts::step_group;
 use super::region::{PairKey, Region, Segment, StepStatic};
 use super::stats::{Counters, NumericalFailure, StageSeconds};
 use super::toi::{Since, SolvedSince};
+use super::{Executor, Inline};
 use crate::body::Body;
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::{self, SphereProxy};
@@ -260,6 +260,7 @@ pub(crate) fn group_input(
         .sum();
     GroupInput {
         predicted_s,
+        prepared: None,
         bodies: ids
             .iter()
             .map(|&w| world.bodies[w as usize].clone())
@@ -290,6 +291,90 @@ pub(crate) struct GroupState {
     pub separating: HashMap<PairKey, Vector3<f64>>,
     pub together: SolvedTogether,
     pub spin_resolves: SpinResolves,
+    /// The first stage's answers, when computed beforehand in shares
+    /// (`prepare_pairs`); `None`: the step computes them.
+    pub prepared: Option<PreparedPairs>,
+}
+
+/// The first stage of a group's step for some of its pairs: their
+/// end-of-step results and times of impact. Each pair's answer depends
+/// only on the group's input, so a large group's pairs can be shared out
+/// over ranks (`prepare_pairs`) before one rank takes its events; the step
+/// then starts from these answers instead of computing them, and ends
+/// exactly as it would have.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct PreparedPairs {
+    pub(crate) results: Vec<PairResult>,
+    pub(crate) toi: Vec<Option<f64>>,
+    pub(crate) counters: Counters,
+    pub(crate) stage: StageSeconds,
+}
+
+impl PreparedPairs {
+    /// V-Clip tasks it ran.
+    pub fn tasks(&self) -> u64 {
+        self.counters.pair_tests
+    }
+
+    /// The shares of one group's pairs, in the order of their ranges, as
+    /// one (the ranges must cover the pairs in order).
+    pub fn joined(shares: Vec<PreparedPairs>) -> PreparedPairs {
+        let mut all = PreparedPairs::default();
+        for s in shares {
+            all.results.extend(s.results);
+            all.toi.extend(s.toi);
+            all.counters.add(&s.counters);
+            all.stage.narrowphase += s.stage.narrowphase;
+            all.stage.time_of_impact += s.stage.time_of_impact;
+        }
+        all
+    }
+}
+
+/// The first stage of group `input`'s step for its pairs `from..to`
+/// (`PreparedPairs`), on any rank.
+pub fn prepare_pairs(
+    st: &StepStatic,
+    input: &GroupInput,
+    (from, to): (usize, usize),
+) -> PreparedPairs {
+    let pairs = &input.pairs[from..to];
+    let mut g = Region {
+        st,
+        ids: input.ids.clone(),
+        bodies: input.bodies.clone(),
+        features: input
+            .features
+            .iter()
+            .filter(|(k, _)| pairs.binary_search(k).is_ok())
+            .cloned()
+            .collect(),
+        warm: BTreeMap::new(),
+        sleep_timer: input.sleep_timer.clone(),
+        sleep_group: input.sleep_group.clone(),
+        counters: Counters::default(),
+        stage: StageSeconds::default(),
+        impacts: Vec::new(),
+        pair_forces: BTreeMap::new(),
+    };
+    let separating: HashMap<PairKey, Vector3<f64>> = input.separating.iter().cloned().collect();
+    let since: SolvedSince = input.since.iter().cloned().collect();
+    let results =
+        g.narrowphase_skipping_separating(&mut Inline::default(), pairs, &input.end, &separating);
+    let clock = std::time::Instant::now();
+    let h = st.settings.dt;
+    let toi = pairs
+        .iter()
+        .zip(&results)
+        .map(|(&k, r)| g.time_of_impact(k, r, &input.seg, h, &since))
+        .collect();
+    g.stage.time_of_impact += clock.elapsed().as_secs_f64();
+    PreparedPairs {
+        results,
+        toi,
+        counters: g.counters,
+        stage: g.stage,
+    }
 }
 
 /// What a group's step reads besides the scene: the step's start time and
@@ -369,12 +454,30 @@ pub struct GroupInput {
     /// Seconds its step is expected to take: what its bodies' groups took
     /// last step (`GroupOutput::busy_s`, shared out over their members).
     predicted_s: f64,
+    /// Its first stage, when computed beforehand (`GroupState::prepared`).
+    prepared: Option<PreparedPairs>,
 }
 
 impl GroupInput {
     /// Seconds its step is expected to take, for the schedule.
     pub fn predicted_s(&self) -> f64 {
         self.predicted_s
+    }
+
+    /// Its candidate pairs (the first stage's tasks).
+    pub fn pair_count(&self) -> usize {
+        self.pairs.len()
+    }
+
+    /// Hands the step its first stage, computed beforehand for all its
+    /// pairs in order (`prepare_pairs`, `PreparedPairs::joined`).
+    pub fn set_prepared(&mut self, prepared: PreparedPairs) {
+        assert_eq!(
+            prepared.results.len(),
+            self.pairs.len(),
+            "one answer per pair"
+        );
+        self.prepared = Some(prepared);
     }
 }
 
@@ -399,12 +502,18 @@ pub struct GroupOutput {
     pub(crate) pieces: Vec<SphereProxy>,
     /// Wall seconds the step took where it ran (the next step's prediction).
     pub(crate) busy_s: f64,
+    /// V-Clip tasks of its first stage run beforehand (`PreparedPairs`):
+    /// in `counters`, but counted where they ran.
+    pub(crate) prepared_tasks: u64,
 }
 
 impl GroupOutput {
     /// V-Clip tasks and island solves the group's step ran.
     pub fn tasks(&self) -> (u64, u64) {
-        (self.counters.pair_tests, self.counters.islands)
+        (
+            self.counters.pair_tests - self.prepared_tasks,
+            self.counters.islands,
+        )
     }
 }
 
@@ -477,6 +586,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         together: islands,
         spin_resolves,
         predicted_s: _,
+        prepared,
     } = input;
     let clock = std::time::Instant::now();
     let mut together = SolvedTogether::new(ids.len());
@@ -502,6 +612,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         separating: separating.into_iter().collect(),
         together,
         spin_resolves: SpinResolves(spin_resolves),
+        prepared,
     };
     let output = step_group(region, state, exec).map(|mut out| {
         out.busy_s = clock.elapsed().as_secs_f64();

@@ -3,7 +3,7 @@
 //! (`PairBook`) that makes an event cost what the bodies it moved cost.
 //! Reads only the group's own `Region` and `GroupState` (see `group`).
 
-use super::group::{GroupOutput, GroupState};
+use super::group::{GroupOutput, GroupState, PreparedPairs};
 use super::region::{PairKey, Region, Segment};
 use super::stats::NumericalFailure;
 use super::toi::{Since, SolvedSince};
@@ -202,6 +202,19 @@ impl PairBook {
         latest
     }
 
+    /// Times of impact already found for `keys` (the group's first stage,
+    /// prepared beforehand): as `earliest` would have found them, no pair
+    /// being accepted yet.
+    fn known(&mut self, keys: &[PairKey], toi: Vec<Option<f64>>) {
+        for (&k, tau) in keys.iter().zip(toi) {
+            self.dirty.remove(&k);
+            self.toi.insert(k, tau);
+            if let Some(t) = tau {
+                self.queue.insert((ImpactTime(t), k));
+            }
+        }
+    }
+
     /// Takes pair `k` out of the running for this step.
     fn accept(&mut self, k: PairKey) {
         if let Some(Some(t)) = self.toi.get(&k) {
@@ -230,15 +243,33 @@ pub(crate) fn step_group(
         mut separating,
         together: mut solved_together,
         mut spin_resolves,
+        prepared,
     } = s;
-    // narrowphase: the group's pairs at the end of the step.
-    let results = g.narrowphase_skipping_separating(exec, &pairs, &end, &separating);
+    // narrowphase: the group's pairs at the end of the step (unless they
+    // were answered beforehand, with their times of impact).
+    let prepared_tasks = prepared.as_ref().map_or(0, PreparedPairs::tasks);
+    let (results, prepared_toi) = match prepared {
+        Some(p) => {
+            g.counters.add(&p.counters);
+            g.stage.narrowphase += p.stage.narrowphase;
+            g.stage.time_of_impact += p.stage.time_of_impact;
+            (p.results, Some(p.toi))
+        }
+        None => (
+            g.narrowphase_skipping_separating(exec, &pairs, &end, &separating),
+            None,
+        ),
+    };
+    let keys = prepared_toi.as_ref().map(|_| pairs.clone());
     let clock = Instant::now();
     let nested_before = g.stage.nested();
     let moving = (0..n)
         .filter(|&i| g.moving(i) && g.bodies[i].is_dynamic())
         .count();
     let mut book = PairBook::new(&g, &seg, &end, pairs, results);
+    if let (Some(keys), Some(toi)) = (keys, prepared_toi) {
+        book.known(&keys, toi);
+    }
     // Each body's predicted spheres, grown as when the groups were formed:
     // a realised piece inside them can meet only what this group holds.
     let predicted: Vec<Option<Vec<SphereProxy>>> = book
@@ -413,5 +444,6 @@ pub(crate) fn step_group(
         events: events as u64,
         pieces,
         busy_s: 0.0,
+        prepared_tasks,
     })
 }

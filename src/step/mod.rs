@@ -37,7 +37,8 @@ mod toi;
 pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
 pub(crate) use contact::{Touching, WarmContact};
 pub use group::{
-    GROUP_MARGIN, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, run_group,
+    GROUP_MARGIN, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PreparedPairs,
+    prepare_pairs, run_group,
 };
 pub use region::StepStatic;
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};

@@ -140,6 +140,9 @@ pub struct Distribution {
     /// steps that ran them on rank 0 alone.
     pub groups_distributed: u64,
     pub groups_local: u64,
+    /// Groups too large to share out whole whose first stage went out in
+    /// ranges of their pairs before they stepped (`PreparePairs`).
+    pub groups_prepared: u64,
     pub message_latency_s: f64,
     /// Wall seconds rank 0 spent inside the stages that go to other ranks
     /// when there are some (pair tasks, island solves, group steps; the
