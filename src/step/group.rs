@@ -308,6 +308,8 @@ pub struct PreparedPairs {
     pub(crate) toi: Vec<Option<f64>>,
     pub(crate) counters: Counters,
     pub(crate) stage: StageSeconds,
+    /// Wall seconds it took where it ran (part of the group's cost).
+    pub(crate) busy_s: f64,
 }
 
 impl PreparedPairs {
@@ -326,6 +328,7 @@ impl PreparedPairs {
             all.counters.add(&s.counters);
             all.stage.narrowphase += s.stage.narrowphase;
             all.stage.time_of_impact += s.stage.time_of_impact;
+            all.busy_s += s.busy_s;
         }
         all
     }
@@ -338,6 +341,7 @@ pub fn prepare_pairs(
     input: &GroupInput,
     (from, to): (usize, usize),
 ) -> PreparedPairs {
+    let clock = std::time::Instant::now();
     let pairs = &input.pairs[from..to];
     let mut g = Region {
         st,
@@ -361,19 +365,20 @@ pub fn prepare_pairs(
     let since: SolvedSince = input.since.iter().cloned().collect();
     let results =
         g.narrowphase_skipping_separating(&mut Inline::default(), pairs, &input.end, &separating);
-    let clock = std::time::Instant::now();
+    let toi_clock = std::time::Instant::now();
     let h = st.settings.dt;
     let toi = pairs
         .iter()
         .zip(&results)
         .map(|(&k, r)| g.time_of_impact(k, r, &input.seg, h, &since))
         .collect();
-    g.stage.time_of_impact += clock.elapsed().as_secs_f64();
+    g.stage.time_of_impact += toi_clock.elapsed().as_secs_f64();
     PreparedPairs {
         results,
         toi,
         counters: g.counters,
         stage: g.stage,
+        busy_s: clock.elapsed().as_secs_f64(),
     }
 }
 
@@ -589,6 +594,8 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         prepared,
     } = input;
     let clock = std::time::Instant::now();
+    // A first stage run beforehand is part of what the group cost.
+    let prepared_s = prepared.as_ref().map_or(0.0, |p| p.busy_s);
     let mut together = SolvedTogether::new(ids.len());
     together.record_islands(islands);
     let region = Region {
@@ -615,7 +622,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         prepared,
     };
     let output = step_group(region, state, exec).map(|mut out| {
-        out.busy_s = clock.elapsed().as_secs_f64();
+        out.busy_s = clock.elapsed().as_secs_f64() + prepared_s;
         out
     });
     GroupReply(Some(output.map_err(GroupFailure::from)))
