@@ -17,7 +17,7 @@
 #
 # Usage: scripts/bench_scaling.sh [--tiny]      (or TINY=1)
 # Knobs: COUNTS="1 2 5 ..." BIG_COUNTS="100" HUGE_COUNTS="200" RANKS="1 2 3 4 5"
-#        REPS=3 REPS60=1 LP_REPS=5 RUN_LIMIT=300 (seconds a run may take)
+#        REPS=3 REPS60=1 LP_REPS=5 CORE_REPS=5 RUN_LIMIT=300 (seconds a run may take)
 #        KEEP_RUNS=1 keeps every run's folder (summary.json, trajectory).
 # On a machine with more cores, run it there with its own BENCH_MACHINE and
 # keep both result folders.
@@ -44,6 +44,8 @@ else
   extra=(); lp_extra=()
 fi
 RUN_LIMIT=${RUN_LIMIT:-300}
+# Runs of each real-cores configuration (medians of 5 by default).
+CORE_REPS=${CORE_REPS:-$([ "$tiny" = 1 ] && echo 1 || echo 5)}
 
 cargo build --release --quiet
 cargo build --release --quiet --manifest-path bench/tools/Cargo.toml --target-dir "${CARGO_TARGET_DIR:-target}"
@@ -135,7 +137,7 @@ pour_opts=(--duration "${POUR_DURATION:-2.0}")
 [ "$tiny" = 1 ] && pour_opts=()   # extra already holds --tiny's duration
 sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
     -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml >"$tmp/crowd200.toml"
-for rep in $(seq 1 "$REPS"); do
+for rep in $(seq 1 "$CORE_REPS"); do
   for r in $(printf '%s\n' 1 "$CORE_RANKS" | sort -un); do
     run cores 121 "$r" compute "$rep" bench/scenes/eight_stacks.toml --no-render --no-sleep
     run cores_pour 201 "$r" compute "$rep" "$tmp/crowd200.toml" --no-render "${pour_opts[@]}"
@@ -147,7 +149,7 @@ done
   echo "machine: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores"
   echo "mpirun: $(mpirun --version 2>/dev/null | head -1)"
   echo "rigidsim: $(git describe --always --dirty 2>/dev/null || echo unknown)"
-  echo "settings: COUNTS='$COUNTS' BIG_COUNTS='$BIG_COUNTS' HUGE_COUNTS='$HUGE_COUNTS' RANKS='$RANKS' REPS=$REPS REPS60=$REPS60 LP_REPS=$LP_REPS tiny=$tiny"
+  echo "settings: COUNTS='$COUNTS' BIG_COUNTS='$BIG_COUNTS' HUGE_COUNTS='$HUGE_COUNTS' RANKS='$RANKS' REPS=$REPS REPS60=$REPS60 LP_REPS=$LP_REPS CORE_REPS=$CORE_REPS tiny=$tiny"
   echo "elapsed: $(( $(date +%s) - started )) s"
 } >"$out/scaling_machine.txt"
 cat "$out/scaling_machine.txt"
