@@ -170,10 +170,11 @@ const REPLY_DEADLINE: Duration = Duration::from_secs(10);
 
 /// Share of its speed that rank 0 plans for itself (it also packs and merges).
 const COORDINATOR_SHARE: f64 = 0.5;
-/// The same for group steps, when deciding whether to distribute them: a
-/// group's input and output are packed once, and rank 0 steps groups while
-/// the workers step theirs (`self_schedule`), so it counts at full speed.
-const COORDINATOR_SHARE_GROUPS: f64 = 1.0;
+/// The same for the self-scheduled stages (island solves, group steps),
+/// when deciding whether to distribute them: rank 0 works through tasks
+/// while the workers work through theirs (`self_schedule`), so it counts at
+/// full speed.
+const SELF_SCHEDULED_SHARE: f64 = 1.0;
 /// Chunks of group steps a worker holds at most: the one it steps and the
 /// next, so it never waits for rank 0 between them.
 const CHUNKS_IN_FLIGHT: usize = 1;
@@ -827,7 +828,8 @@ impl MpiExecutor<'_> {
             .collect();
         let costs: Vec<f64> = units.iter().map(|u| u * self.model.island_coef).collect();
         let total: f64 = costs.iter().sum();
-        let workers = self.workers_for(total, tasks.len());
+        // Self-scheduled: rank 0 works at its full speed (as for groups).
+        let workers = self.workers_for_share(total, tasks.len(), SELF_SCHEDULED_SHARE);
         if workers == 0 {
             self.dist.solve_local += 1;
             let clock = Instant::now();
@@ -864,7 +866,7 @@ impl MpiExecutor<'_> {
         // Seconds, from what the same bodies' groups took last step.
         let costs: Vec<f64> = inputs.iter().map(GroupInput::predicted_s).collect();
         let total: f64 = costs.iter().sum();
-        let workers = self.workers_for_share(total, inputs.len(), COORDINATOR_SHARE_GROUPS);
+        let workers = self.workers_for_share(total, inputs.len(), SELF_SCHEDULED_SHARE);
         if workers == 0 {
             // On rank 0, whose executor (this one) still scatters the
             // groups' own narrowphase batches and island solves where they
