@@ -1351,7 +1351,7 @@ fn crossed_edges_give_one_point_and_parallel_edges_two() {
 /// checked with qhull; parry agrees below); V-Clip, warm-started from the
 /// previous step's features, ended on features 1.7e-12 m apart and called
 /// them apart, so the contact missed the overlap and the pair sank 11.8 µm
-/// (docs/stability.md, fragile 1). From any starting feature pair V-Clip
+/// (docs/stability.md, *Regression scenes*). From any starting feature pair V-Clip
 /// must now find the overlap, and the separating-axis test must choose the
 /// 0.750 µm axis across the edges over the hull's face 15° away (0.776 µm).
 #[test]

@@ -59,7 +59,7 @@ pub struct ContactPoint {
 /// touches), B's, or the cross product of two edges, one on each body
 /// (world directions). Two edges sliding across each other while both
 /// bodies spin bend the gap at up to 2·ṅ·(relative velocity): 245 m/s² for
-/// two light hulls spinning at 20 rad/s (docs/stability.md, *Random scenes*).
+/// two light hulls spinning at 20 rad/s (docs/stability.md, *Regression scenes*).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum NormalTurn {
     WithA,

@@ -201,7 +201,7 @@ pub const TOUCHING_REL_TOL: f64 = 1e-12;
 /// crossing the hull's, ended apart by 1.7e-12 m while they overlapped by
 /// 0.75 µm (exact, from the hull of A − B); the contact missed the deep
 /// side, which sank 11.8 µm before the step's end, and its impact, placed
-/// at that same instant again, was accepted (docs/stability.md, fragile 1).
+/// at that same instant again, was accepted (docs/stability.md, *Regression scenes*).
 /// At this distance an impact's bisection ends anyway (`TOI_GAP`, 0.1 µm).
 pub const VCLIP_CHECKED_REL: f64 = 1e-6;
 
@@ -975,7 +975,7 @@ pub fn separating_axis(
     // contact, and the smaller overlap wins: a box's corner edge against a
     // hull's bottom edge, both on a floor, overlapped 0.750 µm across the
     // edges and 0.776 µm along the hull's face 15° away, whose contact
-    // points missed the overlap (docs/stability.md, fragile 1).
+    // points missed the overlap (docs/stability.md, *Regression scenes*).
     let reproduces_face = best_edge.1.dot(&best_face.1) >= FACE_CONTACT_ANGLE.cos();
     let bias = if reproduces_face {
         EDGE_AXIS_REL_BIAS * a.scale().min(b.scale())

@@ -27,8 +27,8 @@ pub const RATCHET_GAP: f64 = 0.1 * TOI_GAP;
 /// than `RATCHET_GAP` deeper (each event must make progress). With
 /// `TOI_GAP` for every point (before 22ce855) a pair starting a step 9.95 µm
 /// deep ended it at 10.05 µm unseen, and one that closed again after each
-/// impact ratcheted 0.1 µm per event (fragile 1 in docs/stability.md: 9 of
-/// 1200 sweep scenes ended up to 0.14 µm past the tolerance).
+/// impact ratcheted 0.1 µm per event (9 of 1200 sweep scenes ended up to
+/// 0.14 µm past the tolerance; docs/stability.md, *Regression scenes*).
 pub(crate) fn allowed_depth(carried: f64) -> f64 {
     let ceiling = CONTACT_TOLERANCE - RATCHET_GAP;
     carried + (ceiling - carried).clamp(RATCHET_GAP, TOI_GAP)
@@ -130,7 +130,7 @@ impl Region<'_> {
     /// point of a pair already 7 µm deep landed 7 µm deep unseen: a bolt
     /// rolling on the 40-gon rim of its shaft's end, each rim corner in turn
     /// landing so and the overlap recovery lifting it out again, gained
-    /// energy and wobbled for 50 s (docs/stability.md, fragile 6).
+    /// energy and wobbled for 50 s (docs/stability.md, *Regression scenes*).
     ///
     /// Each point's two body points (A's and B's, at the point at `t`) are
     /// taken back to `since` with their bodies; their gap then, along the
