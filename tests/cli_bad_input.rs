@@ -308,6 +308,125 @@ fn bad_command_line_override_exits_2_naming_the_option() {
     }
 }
 
+// ------------------------------------------------ absurd but finite numbers
+
+/// A scene with one cube, its `[[bodies]]` entry ending with `extra`.
+fn cube_with(extra: &str) -> String {
+    one_object(&format!("{CUBE}\nmass = 1.0")) + extra + "\n"
+}
+
+/// Issue 23: `velocity = [1e308, 0, 0]` loaded, then failed at t = 0 with
+/// exit status 3 ("numerical failure … solve_islands"). A speed above the
+/// step's own bound (10⁶ m/s), or a spin at which the body's surface would
+/// move faster, is bad input naming the field.
+#[test]
+fn absurd_speed_is_bad_input() {
+    for (extra, field) in [
+        ("velocity = [1e308, 0.0, 0.0]", "bodies[0].velocity"),
+        ("velocity = [0.0, -1.1e6, 0.0]", "bodies[0].velocity"),
+        (
+            "angular_velocity = [0.0, 0.0, 1e308]",
+            "bodies[0].angular_velocity",
+        ),
+        // |ω| × 0.173 m (the cube's corner) = 1.7e6 m/s.
+        (
+            "angular_velocity = [1e7, 0.0, 0.0]",
+            "bodies[0].angular_velocity",
+        ),
+        (
+            "driven = { velocity = [0.0, 0.0, -1e300] }",
+            "bodies[0].driven.velocity",
+        ),
+    ] {
+        let line = assert_refused(&Case::new(&cube_with(extra)), &[field, "1e6 m/s"]);
+        assert!(!line.contains("numerical failure"), "{line}");
+    }
+    let scatter = format!(
+        "{WORLD}[objects.cube]\n{CUBE}\nmass = 1.0\n\n[[scatter]]\nobjects = [\"cube\"]\n\
+         count = 2\nmin = [-1.0, -1.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nvelocity = [1e20, 0.0, 0.0]\n"
+    );
+    assert_refused(&Case::new(&scatter), &["scatter[0].velocity", "1e6 m/s"]);
+    // Fast but within the bound: runs (a step at 10⁶ m/s itself would end
+    // the run, gravity adding to the speed).
+    let fast = Case::new(&cube_with("velocity = [5e5, 0.0, 0.0]"));
+    let o = fast.run(&["--duration", "0.02"]);
+    assert_eq!(o.code, Some(0), "stderr:\n{}", o.stderr);
+}
+
+/// A body placed beyond 10⁶ m from the origin on some axis (or a scatter
+/// box reaching there) is bad input naming the field.
+#[test]
+fn absurd_position_is_bad_input() {
+    for (extra, field) in [
+        ("position = [0.0, 0.0, 1e300]", "bodies[0].position"),
+        ("position = [-2e6, 0.0, 0.0]", "bodies[0].position"),
+    ] {
+        assert_refused(&Case::new(&cube_with(extra)), &[field, "1e6 m"]);
+    }
+    let scatter = format!(
+        "{WORLD}[objects.cube]\n{CUBE}\nmass = 1.0\n\n[[scatter]]\nobjects = [\"cube\"]\n\
+         count = 2\nmin = [-1.0, -1.0, 0.0]\nmax = [1.0, 1.0, 1e300]\n"
+    );
+    assert_refused(&Case::new(&scatter), &["scatter[0].max", "1e6 m"]);
+}
+
+/// Masses outside 10⁻¹² to 10¹² kg (given, or from a density) and objects
+/// smaller than the contact tolerance or larger than 10⁶ m are bad input
+/// naming the field.
+#[test]
+fn absurd_masses_and_sizes_are_bad_input() {
+    for (object, field) in [
+        (format!("{CUBE}\nmass = 1e300"), "objects.thing.mass"),
+        (format!("{CUBE}\nmass = 1e-300"), "objects.thing.mass"),
+        (format!("{CUBE}\ndensity = 1e300"), "objects.thing.density"),
+        (
+            "shape = { box = { half_extents = [1e200, 1e200, 1e200] } }\nmass = 1.0".into(),
+            "objects.thing.shape",
+        ),
+        (
+            "shape = { sphere = { radius = 1e-50 } }\nmass = 1.0".into(),
+            "objects.thing.shape",
+        ),
+    ] {
+        assert_refused(
+            &Case::new(&one_object(&object)),
+            &[field, "must be between"],
+        );
+    }
+}
+
+/// A run that needs more than 10⁹ steps (duration, or max_duration for an
+/// until_rest scene, over dt; from the scene or from --duration / --dt) is
+/// bad input naming the field or the option, refused at once.
+#[test]
+fn too_many_steps_is_bad_input() {
+    let long = format!("[world]\ndt = 0.01\nduration = 1e8\n[objects.thing]\n{CUBE}\nmass = 1.0\n");
+    assert_refused(
+        &Case::new(&long),
+        &["world.duration", "1.000e10 steps", "1e9"],
+    );
+    let restless = format!(
+        "[world]\ndt = 1e-3\nuntil_rest = true\nmax_duration = 1e300\n[objects.thing]\n{CUBE}\nmass = 1.0\n"
+    );
+    assert_refused(&Case::new(&restless), &["world.max_duration", "1e9"]);
+    let case = Case::new(&cube_with(""));
+    for args in [["--duration", "1e12"], ["--dt", "1e-12"]] {
+        let o = case.run(&args);
+        assert_no_panic(&o);
+        assert_eq!(o.code, Some(2), "{args:?}; stderr:\n{}", o.stderr);
+        assert!(o.elapsed < QUICK, "took {:?} to refuse", o.elapsed);
+        assert_eq!(o.stderr.lines().count(), 1, "stderr:\n{}", o.stderr);
+        for name in [case.scene().as_str(), args[0], "1e9"] {
+            assert!(
+                o.stderr.contains(name),
+                "{args:?} does not name {name}: {}",
+                o.stderr
+            );
+        }
+        assert!(!case.path("out/summary.json").exists());
+    }
+}
+
 // ------------------------------------------------------------- a good scene
 
 /// A free-falling cube and an off-centre compound (its centre of mass 0.2 m

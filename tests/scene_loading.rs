@@ -1274,3 +1274,26 @@ fn load_profile_scene_has_the_thesis_grid_of_27_spheres() {
 fn merged_faces(o: &rigidsim::body::ObjectDef) -> usize {
     o.parts.iter().map(|p| p.hull.face_count()).sum()
 }
+
+// ------------------------------------------------------------ issue 23
+
+/// The bounds of issue 23 admit what they state, inclusive: a body 10⁶ m
+/// out on every axis at 10⁶ m/s, a cube whose corners spin at just under
+/// 10⁶ m/s, masses of 10⁻¹² and 10¹² kg on objects 10 µm and 10⁶ m across,
+/// and a run of exactly 10⁹ steps.
+#[test]
+fn numbers_at_the_bounds_load() {
+    let s = load_ok(
+        "[world]\ndt = 0.01\nduration = 1e7\n\
+         [objects.cube]\nshape = { box = { half_extents = [0.1, 0.1, 0.1] } }\nmass = 1.0\n\
+         [objects.speck]\nshape = { box = { half_extents = [5e-6, 5e-6, 5e-6] } }\nmass = 1e-12\n\
+         [objects.slab]\nshape = { box = { half_extents = [5e5, 5e5, 1.0] } }\nmass = 1e12\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [1e6, -1e6, 1e6]\nvelocity = [0.0, 1e6, 0.0]\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [0.0, 0.0, 10.0]\n\
+         angular_velocity = [0.0, 0.0, 5.77e6]\n\
+         [[bodies]]\nobject = \"speck\"\nposition = [0.0, 0.0, 20.0]\n\
+         [[bodies]]\nobject = \"slab\"\nposition = [0.0, 0.0, -1.0]\nfixed = true\n",
+    );
+    assert_eq!(s.settings.total_steps(), 1_000_000_000);
+    assert_eq!(s.bodies.len(), 4);
+}

@@ -4,6 +4,7 @@
 //! Every rank calls `load` itself: static shapes and masses never travel.
 //! Every problem becomes one `SceneError` naming the file and the field.
 
+pub mod bounds;
 pub mod mesh_files;
 pub mod schema;
 pub mod shapes;
@@ -61,6 +62,12 @@ impl Settings {
     /// Simulated time at which the run stops at the latest.
     pub fn end_time(&self) -> f64 {
         self.duration.unwrap_or(self.max_duration)
+    }
+
+    /// Steps to the end time (saturating at `u64::MAX`); a run takes them
+    /// all unless it comes to rest first.
+    pub fn total_steps(&self) -> u64 {
+        (self.end_time() / self.dt - 1e-9).ceil().max(0.0) as u64
     }
 }
 
@@ -208,6 +215,10 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         shapes::finite_all(&b.position, &format!("{f}.position"))?;
         shapes::finite_all(&b.velocity, &format!("{f}.velocity"))?;
         shapes::finite_all(&b.angular_velocity, &format!("{f}.angular_velocity"))?;
+        let reach = bounds::reach(&objects[object.0 as usize]);
+        bounds::check_position(&b.position, &format!("{f}.position"))?;
+        bounds::check_speed(&b.velocity, &format!("{f}.velocity"))?;
+        bounds::check_spin(&b.angular_velocity, reach, &format!("{f}.angular_velocity"))?;
         let orientation = shapes::unit_quaternion(&b.orientation, &format!("{f}.orientation"))?;
         let kind = match (&b.driven, b.fixed) {
             (Some(_), true) => {
@@ -219,6 +230,12 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
             (Some(d), false) => {
                 shapes::finite_all(&d.velocity, &format!("{f}.driven.velocity"))?;
                 shapes::finite_all(&d.angular_velocity, &format!("{f}.driven.angular_velocity"))?;
+                bounds::check_speed(&d.velocity, &format!("{f}.driven.velocity"))?;
+                bounds::check_spin(
+                    &d.angular_velocity,
+                    reach,
+                    &format!("{f}.driven.angular_velocity"),
+                )?;
                 BodyKind::Driven {
                     velocity: d.velocity.into(),
                     angular_velocity: d.angular_velocity.into(),
@@ -307,6 +324,11 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
             "is required unless until_rest = true".into(),
         ));
     }
+    let steps_field = if w.duration.is_some() {
+        "world.duration"
+    } else {
+        "world.max_duration"
+    };
     if let Some(s) = file.output.sample_every {
         shapes::positive(s, "output.sample_every")?;
     }
@@ -345,7 +367,7 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
             })
         }
     };
-    Ok(Settings {
+    let settings = Settings {
         gravity: w.gravity.into(),
         dt: w.dt,
         duration: w.duration,
@@ -357,7 +379,9 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
         friction_rule: w.friction_rule,
         sample_every: file.output.sample_every,
         render,
-    })
+    };
+    bounds::check_step_count(&settings).map_err(|m| (steps_field.to_string(), m))?;
+    Ok(settings)
 }
 
 /// Distinct, readable colours for object definitions without `color`.
@@ -384,6 +408,10 @@ fn build_object(
     for p in &named {
         moments.add_mesh(p.hull.vertices(), &p.hull.triangles());
     }
+    bounds::check_size(
+        bounds::extent(named.iter().map(|p| &p.hull)),
+        &format!("{f}.shape"),
+    )?;
     let props = moments.finish();
     let scale = named
         .iter()
@@ -403,11 +431,14 @@ fn build_object(
         (None, None) => return Err((format!("{f}.mass"), "is required (or give density)".into())),
         (Some(m), None) => {
             shapes::positive(m, &format!("{f}.mass"))?;
+            bounds::check_mass(m, &format!("{f}.mass"), "is")?;
             m
         }
         (None, Some(d)) => {
             shapes::positive(d, &format!("{f}.density"))?;
-            d * props.volume
+            let m = d * props.volume;
+            bounds::check_mass(m, &format!("{f}.density"), "gives a mass of")?;
+            m
         }
     };
     let inertia = match &s.inertia {
@@ -696,6 +727,9 @@ fn scatter(
     shapes::finite_all(&s.min, &format!("{f}.min"))?;
     shapes::finite_all(&s.max, &format!("{f}.max"))?;
     shapes::finite_all(&s.velocity, &format!("{f}.velocity"))?;
+    bounds::check_position(&s.min, &format!("{f}.min"))?;
+    bounds::check_position(&s.max, &format!("{f}.max"))?;
+    bounds::check_speed(&s.velocity, &format!("{f}.velocity"))?;
     if (0..3).any(|k| s.min[k] > s.max[k]) {
         return Err((format!("{f}.max"), "must be ≥ min on every axis".into()));
     }

@@ -333,7 +333,14 @@ impl World {
         (self.bodies[body].pose() * Point3::from(local)).coords
     }
 }
-/// Stops the run when a state is non-finite or faster than 10⁶ m/s,
+/// The speed no body may reach, m/s: a step that produces one stops the run
+/// (`check_states`), and a scene that starts with one is refused
+/// (`scene::load`). The fastest bodies the tests throw move at a thousandth
+/// of it (1000 m/s at a 1 cm wall); at 10⁶ m/s a 10 ms step carries a body
+/// 10 km.
+pub const MAX_SPEED: f64 = 1e6;
+
+/// Stops the run when a state is non-finite or faster than `MAX_SPEED`,
 /// naming the stage that produced it: `solve_islands` right after a
 /// contact solve (impulses), `integrate` at the end of the step (forces,
 /// including a scene's own `[[forces]]`, acting over it). `states` are
@@ -350,7 +357,7 @@ pub(crate) fn check_states<'a>(
             && s.orientation.coords.iter().all(|x| x.is_finite());
         let detail = if !finite {
             "has a non-finite state".to_string()
-        } else if s.velocity.norm() > 1e6 {
+        } else if s.velocity.norm() > MAX_SPEED {
             format!("exploded (speed {:.3e} m/s)", s.velocity.norm())
         } else {
             continue;
