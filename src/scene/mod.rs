@@ -49,6 +49,9 @@ pub struct Settings {
     pub duration: Option<f64>,
     pub until_rest: bool,
     pub max_duration: f64,
+    /// Dynamic bodies whose centre of mass goes below this stop being
+    /// simulated; `f64::NEG_INFINITY` when none ever does (a scene without
+    /// `fall_z` and without fixed bodies, `default_fall_z`).
     pub fall_z: f64,
     pub frame_interval: f64,
     pub restitution_rule: CombineRule,
@@ -68,6 +71,38 @@ impl Settings {
     /// all unless it comes to rest first.
     pub fn total_steps(&self) -> u64 {
         (self.end_time() / self.dt - 1e-9).ceil().max(0.0) as u64
+    }
+}
+
+/// How far below the lowest point of the fixed bodies `fall_z` lies when the
+/// scene does not set it, metres.
+pub const FALL_BELOW_FIXED: f64 = 1.0;
+
+/// `world.fall_z` when the scene does not set it: `FALL_BELOW_FIXED` below
+/// the lowest vertex of any fixed body, in world coordinates (a body that
+/// left the floor over its edge falls past its underside, not its centre),
+/// or no cut-off when no fixed body suggests a floor.
+pub fn default_fall_z(bodies: &[Body], objects: &[ObjectDef]) -> f64 {
+    let lowest = bodies
+        .iter()
+        .filter(|b| matches!(b.kind, BodyKind::Fixed))
+        .flat_map(|b| {
+            let pose = b.pose();
+            objects[b.object.0 as usize]
+                .parts
+                .iter()
+                .flat_map(move |p| {
+                    p.hull
+                        .vertices()
+                        .iter()
+                        .map(move |v| (pose * nalgebra::Point3::from(*v)).z)
+                })
+        })
+        .fold(f64::INFINITY, f64::min);
+    if lowest.is_finite() {
+        lowest - FALL_BELOW_FIXED
+    } else {
+        f64::NEG_INFINITY
     }
 }
 
@@ -176,7 +211,7 @@ fn one_line(s: &str) -> String {
 type FieldResult<T> = Result<T, (String, String)>;
 
 fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldResult<Scene> {
-    let settings = build_settings(&file)?;
+    let mut settings = build_settings(&file)?;
     let mut objects = Vec::new();
     let mut object_ids = std::collections::BTreeMap::new();
     for (index, (obj_name, section)) in file.objects.iter().enumerate() {
@@ -288,6 +323,10 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         });
     }
 
+    if file.world.fall_z.is_none() {
+        settings.fall_z = default_fall_z(&bodies, &objects);
+    }
+
     Ok(Scene {
         name,
         path: path.to_path_buf(),
@@ -310,7 +349,9 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
     }
     shapes::positive(w.frame_interval, "world.frame_interval")?;
     shapes::positive(w.max_duration, "world.max_duration")?;
-    shapes::finite_all(&[w.fall_z], "world.fall_z")?;
+    if let Some(z) = w.fall_z {
+        shapes::finite_all(&[z], "world.fall_z")?;
+    }
     if let Some(d) = w.duration {
         if !d.is_finite() || d < 0.0 {
             return Err((
@@ -373,7 +414,8 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
         duration: w.duration,
         until_rest: w.until_rest,
         max_duration: w.max_duration,
-        fall_z: w.fall_z,
+        // The default depends on the fixed bodies: `build` sets it.
+        fall_z: w.fall_z.unwrap_or(f64::NEG_INFINITY),
         frame_interval: w.frame_interval,
         restitution_rule: w.restitution_rule,
         friction_rule: w.friction_rule,
