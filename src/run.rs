@@ -685,6 +685,7 @@ pub fn run_coordinator(
             .iter()
             .filter(|b| b.activity == Activity::Fallen)
             .count(),
+        fallen: world.fallen.clone(),
         distributed,
         frames_rendered,
         frames_dropped,

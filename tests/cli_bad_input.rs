@@ -427,6 +427,87 @@ fn too_many_steps_is_bad_input() {
     }
 }
 
+// ------------------------------------------------------------ fallen bodies
+
+/// A floor 1 m across, 10 cm thick (lowest point z = −0.1 m, so the
+/// default fall_z is −1.1 m), a cube resting on it and two cubes dropped
+/// beside it.
+const BESIDE_THE_FLOOR: &str = "
+[world]
+dt = 0.01
+duration = 1.0
+
+[objects.floor]
+shape = { box = { half_extents = [0.5, 0.5, 0.05] } }
+mass = 1.0
+
+[objects.cube]
+shape = { box = { half_extents = [0.05, 0.05, 0.05] } }
+mass = 1.0
+
+[[bodies]]
+object = \"floor\"
+position = [0.0, 0.0, -0.05]
+fixed = true
+
+[[bodies]]
+object = \"cube\"
+position = [2.0, 0.0, 0.5]
+
+[[bodies]]
+object = \"cube\"
+position = [-3.0, 0.0, 0.0]
+
+[[bodies]]
+object = \"cube\"
+position = [0.0, 0.0, 0.05]
+";
+
+/// summary.json lists the bodies that fell, each with the simulated time
+/// of the step that found it below fall_z, in the order they fell, beside
+/// the count `bodies_fallen` it always had. In free fall from z0 the
+/// centre is at z0 − g t²/2 (exact to rounding), so body 2 (z0 = 0) passes
+/// −1.1 m in step 48 and body 1 (z0 = 0.5 m) in step 58; the cube on the
+/// floor never falls. A fallen body's rows in trajectory.csv keep the
+/// state it fell with, sample after sample (the README says so).
+#[test]
+fn fallen_bodies_are_listed_with_their_time() {
+    let case = Case::new(BESIDE_THE_FLOOR);
+    let o = case.run(&[]);
+    assert_no_panic(&o);
+    assert_eq!(o.code, Some(0), "stderr:\n{}", o.stderr);
+    let text = std::fs::read_to_string(case.path("out/summary.json")).unwrap();
+    let s: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let step_of = |z0: f64| (1..).find(|&k| z0 - 0.5 * 9.81 * (k as f64 * 0.01).powi(2) < -1.1);
+    let (k2, k1) = (step_of(0.0).unwrap(), step_of(0.5).unwrap());
+    assert_eq!((k2, k1), (48, 58));
+    let expected = serde_json::json!([
+        { "body": 2, "time": k2 as f64 * 0.01 },
+        { "body": 1, "time": k1 as f64 * 0.01 },
+    ]);
+    assert_eq!(s["fallen"], expected, "summary: {text}");
+    assert_eq!(s["bodies_fallen"], 2);
+
+    let csv = std::fs::read_to_string(case.path("out/trajectory.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    for (body, k) in [(1.0, k1), (2.0, k2)] {
+        let fell = k as f64 * 0.01;
+        let mine: Vec<&Vec<f64>> = rows.iter().filter(|r| r[1] == body).collect();
+        let at_fall = mine
+            .iter()
+            .find(|r| (r[0] - fell).abs() < 1e-9)
+            .expect("a row at the fall");
+        assert!(at_fall[4] < -1.1 && at_fall[11] < 0.0, "row {at_fall:?}");
+        for r in mine.iter().filter(|r| r[0] > fell + 1e-9) {
+            assert_eq!(r[2..], at_fall[2..], "body {body} moved after it fell");
+        }
+    }
+}
+
 // ------------------------------------------------------------- a good scene
 
 /// A free-falling cube and an off-centre compound (its centre of mass 0.2 m
