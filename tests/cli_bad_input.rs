@@ -308,6 +308,95 @@ fn bad_command_line_override_exits_2_naming_the_option() {
     }
 }
 
+// ------------------------------------------- bodies placed inside each other
+
+/// Two cubes of `half` m half-extent, their centres `gap` m apart along x
+/// (`2 half` is touching), after `extra` (a floor, a scatter).
+fn two_cubes(half: f64, gap: f64, extra: &str) -> String {
+    format!(
+        "{WORLD}[objects.cube]\nshape = {{ box = {{ half_extents = [{half}, {half}, {half}] }} }}\n\
+         mass = 1.0\n\n[[bodies]]\nobject = \"cube\"\nposition = [0.0, 0.0, 1.0]\n\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [{gap}, 0.0, 1.0]\n{extra}"
+    )
+}
+
+const FLOOR: &str = "
+[objects.floor]
+shape = { box = { half_extents = [1.0, 1.0, 0.1] } }
+mass = 1.0
+
+[[bodies]]
+object = \"floor\"
+position = [0.0, 0.0, -0.1]
+fixed = true
+";
+
+/// Issue 23: two 0.2 m cubes placed 0.05 m apart (0.15 m of overlap) ran
+/// to the end with exit status 0. Bodies overlapping at the start by more
+/// than the contact tolerance are bad input: exit 2 and one line with the
+/// file, both bodies, their objects and the depth (as the step measures it,
+/// to four digits), quickly, whether the other body is dynamic or a fixed
+/// floor.
+#[test]
+fn bodies_overlapping_at_the_start_are_rejected() {
+    let line = assert_refused(
+        &Case::new(&two_cubes(0.1, 0.05, "")),
+        &["bodies[1]", "bodies[0]", "object 'cube'", "0.1500 m"],
+    );
+    assert!(line.contains("overlaps"), "{line}");
+    // A cube sunk 1 cm into a fixed floor (listed first: body 0).
+    let sunk = format!(
+        "{WORLD}{FLOOR}\n[objects.cube]\n{CUBE}\nmass = 1.0\n\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [0.3, 0.0, 0.09]\n"
+    );
+    assert_refused(
+        &Case::new(&sunk),
+        &[
+            "bodies[1]",
+            "object 'cube'",
+            "bodies[0] (object 'floor')",
+            "0.01000 m",
+        ],
+    );
+}
+
+/// Bodies that touch, or overlap within the contact tolerance (10 µm), are
+/// fine: face to face, 5 µm into each other, resting on a floor, and
+/// scattered around a fixed post (the scatter's placement keeps clear of
+/// it, and of every body placed before it).
+#[test]
+fn touching_bodies_at_the_start_are_accepted() {
+    let post = "
+[objects.post]
+shape = { box = { half_extents = [0.05, 0.05, 0.5] } }
+mass = 1.0
+
+[[bodies]]
+object = \"post\"
+position = [0.0, 0.3, 0.5]
+fixed = true
+
+[[scatter]]
+objects = [\"cube\"]
+count = 40
+min = [-0.4, -0.4, 0.1]
+max = [0.4, 0.4, 1.0]
+seed = 7
+";
+    for scene in [
+        two_cubes(0.1, 0.2, ""),
+        two_cubes(0.1, 0.2 - 5e-6, ""),
+        two_cubes(0.1, 0.2, FLOOR).replace("1.0]\n", "0.1]\n"),
+        two_cubes(0.05, 0.3, post),
+    ] {
+        let case = Case::new(&scene);
+        let o = case.run(&["--duration", "0.05"]);
+        assert_no_panic(&o);
+        assert_eq!(o.code, Some(0), "scene:\n{scene}\nstderr:\n{}", o.stderr);
+        assert!(case.path("out/summary.json").exists());
+    }
+}
+
 // ------------------------------------------------ absurd but finite numbers
 
 /// A scene with one cube, its `[[bodies]]` entry ending with `extra`.

@@ -446,7 +446,7 @@ position = [1.0, 2.0, 3.0]
 
 [[bodies]]
 object = \"offcentre\"
-position = [1.0, 2.0, 3.0]
+position = [5.0, 2.0, 3.0]
 # A quarter turn about z: the centre of mass swings from +x to +y of the origin.
 orientation = [0.7071067811865476, 0.0, 0.0, 0.7071067811865476]
 velocity = [0.5, 0.0, 0.0]
@@ -462,7 +462,7 @@ angular_velocity = [1.0, -2.0, 3.0]
     );
     assert_vector_close(
         &turned.state.position,
-        &Vector3::new(1.0, 2.2, 3.0),
+        &Vector3::new(5.0, 2.2, 3.0),
         1e-12,
         "rotated",
     );

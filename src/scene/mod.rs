@@ -6,6 +6,7 @@
 
 pub mod bounds;
 pub mod mesh_files;
+mod overlap;
 pub mod schema;
 pub mod shapes;
 
@@ -13,6 +14,7 @@ use crate::body::mass::{MomentSum, check_inertia, principal_axes};
 use crate::body::{
     Activity, Body, BodyId, BodyKind, BodyState, BoundingSphere, ObjectDef, ObjectId, Part,
 };
+use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use schema::{CombineRule, ObjectSection, SceneFile};
@@ -323,6 +325,9 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         });
     }
 
+    if let Some(o) = overlap::first_overlap(&bodies, &objects) {
+        return Err(overlap_error(&o, &file, &bodies, &objects));
+    }
     if file.world.fall_z.is_none() {
         settings.fall_z = default_fall_z(&bodies, &objects);
     }
@@ -424,6 +429,69 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
     };
     bounds::check_step_count(&settings).map_err(|m| (steps_field.to_string(), m))?;
     Ok(settings)
+}
+
+/// One line for bodies placed inside each other: the later body's field,
+/// both bodies with their objects, and the depth.
+fn overlap_error(
+    o: &overlap::StartOverlap,
+    file: &SceneFile,
+    bodies: &[Body],
+    objects: &[ObjectDef],
+) -> (String, String) {
+    let object = |i: usize| &objects[bodies[i].object.0 as usize].name;
+    let (field_b, who_b) = match origin(o.b, file) {
+        Origin::Listed(i) => (format!("bodies[{i}]"), format!("object '{}'", object(o.b))),
+        Origin::Scattered(k) => (
+            format!("scatter[{k}]"),
+            format!("body {} (object '{}')", o.b, object(o.b)),
+        ),
+    };
+    let who_a = match origin(o.a, file) {
+        Origin::Listed(i) => format!("bodies[{i}] (object '{}')", object(o.a)),
+        Origin::Scattered(k) => format!("body {} of scatter[{k}] (object '{}')", o.a, object(o.a)),
+    };
+    (
+        field_b,
+        format!(
+            "{who_b} overlaps {who_a} by {} m at the start, more than the contact tolerance \
+             ({CONTACT_TOLERANCE:e} m); move them apart (bodies may touch)",
+            four_digits(o.depth)
+        ),
+    )
+}
+
+/// Where a body of the scene comes from.
+enum Origin {
+    /// `[[bodies]]` entry i.
+    Listed(usize),
+    /// Placed by `[[scatter]]` entry k.
+    Scattered(usize),
+}
+
+/// Body `i` in scene order: the `[[bodies]]` in file order, then each
+/// scatter's bodies in turn.
+fn origin(i: usize, file: &SceneFile) -> Origin {
+    if i < file.bodies.len() {
+        return Origin::Listed(i);
+    }
+    let mut end = file.bodies.len() as u64;
+    for (k, s) in file.scatter.iter().enumerate() {
+        end += s.count;
+        if (i as u64) < end {
+            return Origin::Scattered(k);
+        }
+    }
+    Origin::Scattered(file.scatter.len().saturating_sub(1))
+}
+
+/// `x` with four significant digits, in plain decimals (0.1500, 0.00002000).
+fn four_digits(x: f64) -> String {
+    if !(x.is_finite() && x > 0.0) {
+        return format!("{x}");
+    }
+    let decimals = (3.0 - x.log10().floor()).clamp(0.0, 20.0) as usize;
+    format!("{x:.decimals$}")
 }
 
 /// Distinct, readable colours for object definitions without `color`.
