@@ -10,6 +10,7 @@ use crate::output::trajectory::{Continued, TrajectoryWriter};
 use crate::output::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::render;
 use crate::scene::Scene;
+use crate::scene::bounds::{self, readable};
 use crate::step::{Executor, World};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -56,6 +57,18 @@ pub fn apply_overrides(scene: &mut Scene, opts: &RunOptions) -> Result<(), Strin
     }
     if opts.no_render {
         scene.settings.render = None;
+    }
+    if opts.duration.is_some() || opts.dt.is_some() {
+        if let Err(why) = bounds::check_step_count(&scene.settings) {
+            let option = match (opts.duration, opts.dt) {
+                (Some(d), Some(dt)) => {
+                    format!("--duration {} with --dt {}", readable(d), readable(dt))
+                }
+                (Some(d), None) => format!("--duration {}", readable(d)),
+                (None, dt) => format!("--dt {}", readable(dt.unwrap_or(scene.settings.dt))),
+            };
+            return Err(format!("{}: {option}: {why}", scene.path.display()));
+        }
     }
     Ok(())
 }
@@ -480,7 +493,7 @@ pub fn run_coordinator(
         .map(|c| ((c / settings.dt).round() as u64).max(1));
     let dt = settings.dt;
     let end_time = settings.end_time();
-    let total_steps = (end_time / dt - 1e-9).ceil().max(0.0) as u64;
+    let total_steps = settings.total_steps();
     let sample_every = settings.sample_every.unwrap_or(dt);
     let sample_stride = ((sample_every / dt).round() as u64).max(1);
     let frame_stride = ((settings.frame_interval / dt).round() as u64).max(1);
@@ -672,6 +685,7 @@ pub fn run_coordinator(
             .iter()
             .filter(|b| b.activity == Activity::Fallen)
             .count(),
+        fallen: world.fallen.clone(),
         distributed,
         frames_rendered,
         frames_dropped,

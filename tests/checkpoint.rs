@@ -166,6 +166,55 @@ fn resumed_world_ends_with_the_same_state_hash() {
     }
 }
 
+/// The fall times `summary.json` lists (`World::fallen`) are part of the
+/// checkpoint (format 8): resumed before, between and after two falls
+/// beside a floor, a run lists the same falls at the same times.
+#[test]
+fn fall_times_survive_a_resume() {
+    let text = r#"
+[world]
+dt = 0.01
+duration = 1.0
+[objects.floor]
+shape = { box = { half_extents = [0.5, 0.5, 0.05] } }
+mass = 1.0
+[objects.cube]
+shape = { box = { half_extents = [0.05, 0.05, 0.05] } }
+mass = 1.0
+[[bodies]]
+object = "floor"
+position = [0.0, 0.0, -0.05]
+fixed = true
+[[bodies]]
+object = "cube"
+position = [2.0, 0.0, 0.5]
+[[bodies]]
+object = "cube"
+position = [-3.0, 0.0, 0.0]
+"#;
+    let mut reference = World::new(load(text));
+    let mut exec = Inline::default();
+    let mut checkpoints = Vec::new();
+    for k in [30u64, 52, 70] {
+        run_to(&mut reference, &mut exec, k);
+        checkpoints.push(reference.checkpoint().to_bytes());
+    }
+    run_to(&mut reference, &mut exec, 100);
+    let falls: Vec<(u32, f64)> = reference
+        .fallen
+        .iter()
+        .map(|f| (f.body.0, f.time))
+        .collect();
+    assert_eq!(falls, [(2, 48.0 * 0.01), (1, 58.0 * 0.01)]);
+    for bytes in &checkpoints {
+        let ck = Checkpoint::from_bytes(bytes, Path::new("mem")).unwrap();
+        let steps = ck.steps;
+        let mut resumed = World::restore(load(text), ck).unwrap_or_else(|e| panic!("{e}"));
+        run_to(&mut resumed, &mut Inline::default(), 100);
+        assert_eq!(resumed.fallen, reference.fallen, "resumed at step {steps}");
+    }
+}
+
 #[test]
 fn checkpoint_of_another_scene_or_dt_is_refused_by_name() {
     let mut w = World::new(load(SCENE));

@@ -308,6 +308,295 @@ fn bad_command_line_override_exits_2_naming_the_option() {
     }
 }
 
+// ------------------------------------------- bodies placed inside each other
+
+/// Two cubes of `half` m half-extent, their centres `gap` m apart along x
+/// (`2 half` is touching), after `extra` (a floor, a scatter).
+fn two_cubes(half: f64, gap: f64, extra: &str) -> String {
+    format!(
+        "{WORLD}[objects.cube]\nshape = {{ box = {{ half_extents = [{half}, {half}, {half}] }} }}\n\
+         mass = 1.0\n\n[[bodies]]\nobject = \"cube\"\nposition = [0.0, 0.0, 1.0]\n\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [{gap}, 0.0, 1.0]\n{extra}"
+    )
+}
+
+const FLOOR: &str = "
+[objects.floor]
+shape = { box = { half_extents = [1.0, 1.0, 0.1] } }
+mass = 1.0
+
+[[bodies]]
+object = \"floor\"
+position = [0.0, 0.0, -0.1]
+fixed = true
+";
+
+/// Issue 23: two 0.2 m cubes placed 0.05 m apart (0.15 m of overlap) ran
+/// to the end with exit status 0. Bodies overlapping at the start by more
+/// than the contact tolerance are bad input: exit 2 and one line with the
+/// file, both bodies, their objects and the depth (as the step measures it,
+/// to four digits), quickly, whether the other body is dynamic or a fixed
+/// floor.
+#[test]
+fn bodies_overlapping_at_the_start_are_rejected() {
+    let line = assert_refused(
+        &Case::new(&two_cubes(0.1, 0.05, "")),
+        &["bodies[1]", "bodies[0]", "object 'cube'", "0.1500 m"],
+    );
+    assert!(line.contains("overlaps"), "{line}");
+    // A cube sunk 1 cm into a fixed floor (listed first: body 0).
+    let sunk = format!(
+        "{WORLD}{FLOOR}\n[objects.cube]\n{CUBE}\nmass = 1.0\n\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [0.3, 0.0, 0.09]\n"
+    );
+    assert_refused(
+        &Case::new(&sunk),
+        &[
+            "bodies[1]",
+            "object 'cube'",
+            "bodies[0] (object 'floor')",
+            "0.01000 m",
+        ],
+    );
+}
+
+/// Bodies that touch, or overlap within the contact tolerance (10 µm), are
+/// fine: face to face, 5 µm into each other, resting on a floor, and
+/// scattered around a fixed post (the scatter's placement keeps clear of
+/// it, and of every body placed before it).
+#[test]
+fn touching_bodies_at_the_start_are_accepted() {
+    let post = "
+[objects.post]
+shape = { box = { half_extents = [0.05, 0.05, 0.5] } }
+mass = 1.0
+
+[[bodies]]
+object = \"post\"
+position = [0.0, 0.3, 0.5]
+fixed = true
+
+[[scatter]]
+objects = [\"cube\"]
+count = 40
+min = [-0.4, -0.4, 0.1]
+max = [0.4, 0.4, 1.0]
+seed = 7
+";
+    for scene in [
+        two_cubes(0.1, 0.2, ""),
+        two_cubes(0.1, 0.2 - 5e-6, ""),
+        two_cubes(0.1, 0.2, FLOOR).replace("1.0]\n", "0.1]\n"),
+        two_cubes(0.05, 0.3, post),
+    ] {
+        let case = Case::new(&scene);
+        let o = case.run(&["--duration", "0.05"]);
+        assert_no_panic(&o);
+        assert_eq!(o.code, Some(0), "scene:\n{scene}\nstderr:\n{}", o.stderr);
+        assert!(case.path("out/summary.json").exists());
+    }
+}
+
+// ------------------------------------------------ absurd but finite numbers
+
+/// A scene with one cube, its `[[bodies]]` entry ending with `extra`.
+fn cube_with(extra: &str) -> String {
+    one_object(&format!("{CUBE}\nmass = 1.0")) + extra + "\n"
+}
+
+/// Issue 23: `velocity = [1e308, 0, 0]` loaded, then failed at t = 0 with
+/// exit status 3 ("numerical failure … solve_islands"). A speed above the
+/// step's own bound (10⁶ m/s), or a spin at which the body's surface would
+/// move faster, is bad input naming the field.
+#[test]
+fn absurd_speed_is_bad_input() {
+    for (extra, field) in [
+        ("velocity = [1e308, 0.0, 0.0]", "bodies[0].velocity"),
+        ("velocity = [0.0, -1.1e6, 0.0]", "bodies[0].velocity"),
+        (
+            "angular_velocity = [0.0, 0.0, 1e308]",
+            "bodies[0].angular_velocity",
+        ),
+        // |ω| × 0.173 m (the cube's corner) = 1.7e6 m/s.
+        (
+            "angular_velocity = [1e7, 0.0, 0.0]",
+            "bodies[0].angular_velocity",
+        ),
+        (
+            "driven = { velocity = [0.0, 0.0, -1e300] }",
+            "bodies[0].driven.velocity",
+        ),
+    ] {
+        let line = assert_refused(&Case::new(&cube_with(extra)), &[field, "1e6 m/s"]);
+        assert!(!line.contains("numerical failure"), "{line}");
+    }
+    let scatter = format!(
+        "{WORLD}[objects.cube]\n{CUBE}\nmass = 1.0\n\n[[scatter]]\nobjects = [\"cube\"]\n\
+         count = 2\nmin = [-1.0, -1.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nvelocity = [1e20, 0.0, 0.0]\n"
+    );
+    assert_refused(&Case::new(&scatter), &["scatter[0].velocity", "1e6 m/s"]);
+    // Fast but within the bound: runs (a step at 10⁶ m/s itself would end
+    // the run, gravity adding to the speed).
+    let fast = Case::new(&cube_with("velocity = [5e5, 0.0, 0.0]"));
+    let o = fast.run(&["--duration", "0.02"]);
+    assert_eq!(o.code, Some(0), "stderr:\n{}", o.stderr);
+}
+
+/// A body placed beyond 10⁶ m from the origin on some axis (or a scatter
+/// box reaching there) is bad input naming the field.
+#[test]
+fn absurd_position_is_bad_input() {
+    for (extra, field) in [
+        ("position = [0.0, 0.0, 1e300]", "bodies[0].position"),
+        ("position = [-2e6, 0.0, 0.0]", "bodies[0].position"),
+    ] {
+        assert_refused(&Case::new(&cube_with(extra)), &[field, "1e6 m"]);
+    }
+    let scatter = format!(
+        "{WORLD}[objects.cube]\n{CUBE}\nmass = 1.0\n\n[[scatter]]\nobjects = [\"cube\"]\n\
+         count = 2\nmin = [-1.0, -1.0, 0.0]\nmax = [1.0, 1.0, 1e300]\n"
+    );
+    assert_refused(&Case::new(&scatter), &["scatter[0].max", "1e6 m"]);
+}
+
+/// Masses outside 10⁻¹² to 10¹² kg (given, or from a density) and objects
+/// smaller than the contact tolerance or larger than 10⁶ m are bad input
+/// naming the field.
+#[test]
+fn absurd_masses_and_sizes_are_bad_input() {
+    for (object, field) in [
+        (format!("{CUBE}\nmass = 1e300"), "objects.thing.mass"),
+        (format!("{CUBE}\nmass = 1e-300"), "objects.thing.mass"),
+        (format!("{CUBE}\ndensity = 1e300"), "objects.thing.density"),
+        (
+            "shape = { box = { half_extents = [1e200, 1e200, 1e200] } }\nmass = 1.0".into(),
+            "objects.thing.shape",
+        ),
+        (
+            "shape = { sphere = { radius = 1e-50 } }\nmass = 1.0".into(),
+            "objects.thing.shape",
+        ),
+    ] {
+        assert_refused(
+            &Case::new(&one_object(&object)),
+            &[field, "must be between"],
+        );
+    }
+}
+
+/// A run that needs more than 10⁹ steps (duration, or max_duration for an
+/// until_rest scene, over dt; from the scene or from --duration / --dt) is
+/// bad input naming the field or the option, refused at once.
+#[test]
+fn too_many_steps_is_bad_input() {
+    let long = format!("[world]\ndt = 0.01\nduration = 1e8\n[objects.thing]\n{CUBE}\nmass = 1.0\n");
+    assert_refused(
+        &Case::new(&long),
+        &["world.duration", "1.000e10 steps", "1e9"],
+    );
+    let restless = format!(
+        "[world]\ndt = 1e-3\nuntil_rest = true\nmax_duration = 1e300\n[objects.thing]\n{CUBE}\nmass = 1.0\n"
+    );
+    assert_refused(&Case::new(&restless), &["world.max_duration", "1e9"]);
+    let case = Case::new(&cube_with(""));
+    for args in [["--duration", "1e12"], ["--dt", "1e-12"]] {
+        let o = case.run(&args);
+        assert_no_panic(&o);
+        assert_eq!(o.code, Some(2), "{args:?}; stderr:\n{}", o.stderr);
+        assert!(o.elapsed < QUICK, "took {:?} to refuse", o.elapsed);
+        assert_eq!(o.stderr.lines().count(), 1, "stderr:\n{}", o.stderr);
+        for name in [case.scene().as_str(), args[0], "1e9"] {
+            assert!(
+                o.stderr.contains(name),
+                "{args:?} does not name {name}: {}",
+                o.stderr
+            );
+        }
+        assert!(!case.path("out/summary.json").exists());
+    }
+}
+
+// ------------------------------------------------------------ fallen bodies
+
+/// A floor 1 m across, 10 cm thick (lowest point z = −0.1 m, so the
+/// default fall_z is −1.1 m), a cube resting on it and two cubes dropped
+/// beside it.
+const BESIDE_THE_FLOOR: &str = "
+[world]
+dt = 0.01
+duration = 1.0
+
+[objects.floor]
+shape = { box = { half_extents = [0.5, 0.5, 0.05] } }
+mass = 1.0
+
+[objects.cube]
+shape = { box = { half_extents = [0.05, 0.05, 0.05] } }
+mass = 1.0
+
+[[bodies]]
+object = \"floor\"
+position = [0.0, 0.0, -0.05]
+fixed = true
+
+[[bodies]]
+object = \"cube\"
+position = [2.0, 0.0, 0.5]
+
+[[bodies]]
+object = \"cube\"
+position = [-3.0, 0.0, 0.0]
+
+[[bodies]]
+object = \"cube\"
+position = [0.0, 0.0, 0.05]
+";
+
+/// summary.json lists the bodies that fell, each with the simulated time
+/// of the step that found it below fall_z, in the order they fell, beside
+/// the count `bodies_fallen` it always had. In free fall from z0 the
+/// centre is at z0 − g t²/2 (exact to rounding), so body 2 (z0 = 0) passes
+/// −1.1 m in step 48 and body 1 (z0 = 0.5 m) in step 58; the cube on the
+/// floor never falls. A fallen body's rows in trajectory.csv keep the
+/// state it fell with, sample after sample (the README says so).
+#[test]
+fn fallen_bodies_are_listed_with_their_time() {
+    let case = Case::new(BESIDE_THE_FLOOR);
+    let o = case.run(&[]);
+    assert_no_panic(&o);
+    assert_eq!(o.code, Some(0), "stderr:\n{}", o.stderr);
+    let text = std::fs::read_to_string(case.path("out/summary.json")).unwrap();
+    let s: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let step_of = |z0: f64| (1..).find(|&k| z0 - 0.5 * 9.81 * (k as f64 * 0.01).powi(2) < -1.1);
+    let (k2, k1) = (step_of(0.0).unwrap(), step_of(0.5).unwrap());
+    assert_eq!((k2, k1), (48, 58));
+    let expected = serde_json::json!([
+        { "body": 2, "time": k2 as f64 * 0.01 },
+        { "body": 1, "time": k1 as f64 * 0.01 },
+    ]);
+    assert_eq!(s["fallen"], expected, "summary: {text}");
+    assert_eq!(s["bodies_fallen"], 2);
+
+    let csv = std::fs::read_to_string(case.path("out/trajectory.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    for (body, k) in [(1.0, k1), (2.0, k2)] {
+        let fell = k as f64 * 0.01;
+        let mine: Vec<&Vec<f64>> = rows.iter().filter(|r| r[1] == body).collect();
+        let at_fall = mine
+            .iter()
+            .find(|r| (r[0] - fell).abs() < 1e-9)
+            .expect("a row at the fall");
+        assert!(at_fall[4] < -1.1 && at_fall[11] < 0.0, "row {at_fall:?}");
+        for r in mine.iter().filter(|r| r[0] > fell + 1e-9) {
+            assert_eq!(r[2..], at_fall[2..], "body {body} moved after it fell");
+        }
+    }
+}
+
 // ------------------------------------------------------------- a good scene
 
 /// A free-falling cube and an off-centre compound (its centre of mass 0.2 m

@@ -768,6 +768,8 @@ fn scene_without_contacts_does_no_contact_work() {
         [world]
         dt = 0.01
         duration = 1.0
+        # The default before issue 23: the boxes leave the run at z = -1 m.
+        fall_z = -1.0
         [objects.box]
         shape = { box = { half_extents = [0.1, 0.1, 0.1] } }
         mass = 1.0
@@ -785,4 +787,51 @@ fn scene_without_contacts_does_no_contact_work() {
         w.counters.solve.lcp_solves + w.counters.solve.closed_form_solves,
         0
     );
+}
+
+/// Issue 23: a projectile with no floor and no `fall_z` froze as it passed
+/// z = −1 m (the old default cut-off). Thrown up at 4 m/s from z = 1 m it
+/// now follows z = 1 + 4t − g t²/2 down to z = −2.089 m at t = 1.3 s,
+/// within 1e-9 m (and vz = 4 − g t within 1e-12 m/s) at every step, and
+/// never falls out of the simulation.
+#[test]
+fn no_fall_cutoff_without_a_floor() {
+    let mut w = world(
+        r#"
+        [world]
+        dt = 0.01
+        duration = 1.3
+        [objects.ball]
+        shape = { box = { half_extents = [0.1, 0.1, 0.1] } }
+        mass = 1.0
+        [[bodies]]
+        object = "ball"
+        position = [0.0, 0.0, 1.0]
+        velocity = [0.0, 0.0, 4.0]
+        "#,
+    );
+    assert_eq!(w.scene.settings.fall_z, f64::NEG_INFINITY);
+    let mut exec = Inline::default();
+    let mut lowest = f64::INFINITY;
+    while w.time() < 1.3 - 1e-9 {
+        w.step(&mut exec).unwrap_or_else(|e| panic!("{e}"));
+        let (t, s) = (w.time(), w.bodies[0].state);
+        let z = 1.0 + 4.0 * t - 0.5 * G * t * t;
+        assert!(
+            (s.position.z - z).abs() <= 1e-9,
+            "z {} at t = {t}, parabola {z}",
+            s.position.z
+        );
+        assert!(
+            (s.velocity.z - (4.0 - G * t)).abs() <= 1e-12,
+            "vz at t = {t}"
+        );
+        assert_eq!(w.bodies[0].activity, Activity::Awake, "stopped at t = {t}");
+        lowest = lowest.min(s.position.z);
+    }
+    assert!(
+        lowest < -2.08,
+        "lowest z {lowest}: the flight was cut short"
+    );
+    assert!(w.fallen.is_empty() && w.counters.bodies_fallen == 0);
 }

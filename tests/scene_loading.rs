@@ -446,7 +446,7 @@ position = [1.0, 2.0, 3.0]
 
 [[bodies]]
 object = \"offcentre\"
-position = [1.0, 2.0, 3.0]
+position = [5.0, 2.0, 3.0]
 # A quarter turn about z: the centre of mass swings from +x to +y of the origin.
 orientation = [0.7071067811865476, 0.0, 0.0, 0.7071067811865476]
 velocity = [0.5, 0.0, 0.0]
@@ -462,7 +462,7 @@ angular_velocity = [1.0, -2.0, 3.0]
     );
     assert_vector_close(
         &turned.state.position,
-        &Vector3::new(1.0, 2.2, 3.0),
+        &Vector3::new(5.0, 2.2, 3.0),
         1e-12,
         "rotated",
     );
@@ -1273,4 +1273,67 @@ fn load_profile_scene_has_the_thesis_grid_of_27_spheres() {
 /// Faces after coplanar merging, over all parts (a box has 6).
 fn merged_faces(o: &rigidsim::body::ObjectDef) -> usize {
     o.parts.iter().map(|p| p.hull.face_count()).sum()
+}
+
+// ------------------------------------------------------------ issue 23
+
+/// Issue 23: `fall_z` defaulted to −1 m, so a body in free flight with no
+/// floor stopped as it passed z = −1. A scene without `fall_z` now stops
+/// bodies 1 m below the lowest vertex of its fixed bodies, in world
+/// coordinates (a cube of 1 m turned 45° about x reaches 0.707 m below its
+/// centre, not 0.5 m), whatever its dynamic or driven bodies do; it has no
+/// cut-off without fixed bodies; a `fall_z` it sets is kept.
+#[test]
+fn fall_cutoff_defaults_to_a_metre_below_the_lowest_fixed_point() {
+    let block =
+        "[objects.block]\nshape = { box = { half_extents = [0.5, 0.5, 0.5] } }\nmass = 1.0\n";
+    let tilted = "[[bodies]]\nobject = \"block\"\nposition = [0.0, 0.0, 2.0]\n\
+                  orientation = [0.9238795325112867, 0.3826834323650898, 0.0, 0.0]\nfixed = true\n";
+    let higher = "[[bodies]]\nobject = \"block\"\nposition = [5.0, 0.0, 3.0]\nfixed = true\n";
+    let driven = "[[bodies]]\nobject = \"block\"\nposition = [10.0, 0.0, -50.0]\n\
+                  driven = { velocity = [0.0, 0.0, 1.0] }\n";
+    let dynamic = "[[bodies]]\nobject = \"block\"\nposition = [-10.0, 0.0, -20.0]\n";
+
+    let s = load_ok(&format!("{WORLD}{block}{tilted}{higher}{driven}{dynamic}"));
+    let lowest = 2.0 - 0.5 * 2f64.sqrt();
+    let want = lowest - scene::FALL_BELOW_FIXED;
+    assert!(
+        (s.settings.fall_z - want).abs() <= 1e-12,
+        "fall_z {} (want {want}: 1 m below the tilted block's lowest corner)",
+        s.settings.fall_z
+    );
+    assert_eq!(scene::FALL_BELOW_FIXED, 1.0);
+
+    let no_fixed = load_ok(&format!("{WORLD}{block}{driven}{dynamic}"));
+    assert_eq!(
+        no_fixed.settings.fall_z,
+        f64::NEG_INFINITY,
+        "a cut-off without a floor"
+    );
+
+    let given = load_ok(&format!(
+        "[world]\nduration = 1.0\nfall_z = -0.25\n{block}{tilted}"
+    ));
+    assert_eq!(given.settings.fall_z, -0.25);
+}
+
+/// The bounds of issue 23 admit what they state, inclusive: a body 10⁶ m
+/// out on every axis at 10⁶ m/s, a cube whose corners spin at just under
+/// 10⁶ m/s, masses of 10⁻¹² and 10¹² kg on objects 10 µm and 10⁶ m across,
+/// and a run of exactly 10⁹ steps.
+#[test]
+fn numbers_at_the_bounds_load() {
+    let s = load_ok(
+        "[world]\ndt = 0.01\nduration = 1e7\n\
+         [objects.cube]\nshape = { box = { half_extents = [0.1, 0.1, 0.1] } }\nmass = 1.0\n\
+         [objects.speck]\nshape = { box = { half_extents = [5e-6, 5e-6, 5e-6] } }\nmass = 1e-12\n\
+         [objects.slab]\nshape = { box = { half_extents = [5e5, 5e5, 1.0] } }\nmass = 1e12\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [1e6, -1e6, 1e6]\nvelocity = [0.0, 1e6, 0.0]\n\
+         [[bodies]]\nobject = \"cube\"\nposition = [0.0, 0.0, 10.0]\n\
+         angular_velocity = [0.0, 0.0, 5.77e6]\n\
+         [[bodies]]\nobject = \"speck\"\nposition = [0.0, 0.0, 20.0]\n\
+         [[bodies]]\nobject = \"slab\"\nposition = [0.0, 0.0, -1.0]\nfixed = true\n",
+    );
+    assert_eq!(s.settings.total_steps(), 1_000_000_000);
+    assert_eq!(s.bodies.len(), 4);
 }

@@ -11,8 +11,8 @@
 //! forces of the last solve of each touching pair (the warm start of the
 //! iterative solve); and, so that the
 //! summary of a resumed run reads like an uninterrupted one, the counters,
-//! the largest penetration and the frame loop's own marks (initial energy,
-//! frame index). Stage timings are wall-clock of one process and are not kept.
+//! the largest penetration, the time each fallen body fell and the frame
+//! loop's own marks (initial energy, frame index). Stage timings are wall-clock of one process and are not kept.
 //!
 //! The scene is not stored: every rank loads it from its file as usual, and a
 //! fingerprint of what was loaded (shapes and mass properties, initial
@@ -36,18 +36,18 @@
 
 use super::trajectory::TrajectoryMark;
 use super::{FNV_OFFSET, fnv1a, write_atomic};
-use crate::body::{Body, BodyId};
+use crate::body::{Activity, Body, BodyId};
 use crate::collision::narrowphase::CachedFeatures;
 use crate::scene::Scene;
-use crate::step::{Counters, StageSeconds, Touching, WarmContact, World};
+use crate::step::{Counters, Fall, StageSeconds, Touching, WarmContact, World};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// Bump when `Checkpoint` changes shape; older files are then refused by name.
 /// 7: the counters of interaction groups (`groups`, `largest_group`,
-/// `group_reruns`).
-pub const FORMAT: u32 = 7;
+/// `group_reruns`). 8: the time each fallen body fell (`World::fallen`).
+pub const FORMAT: u32 = 8;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";
@@ -88,6 +88,7 @@ pub struct Checkpoint {
     pub bodies: Vec<Body>,
     pub counters: Counters,
     pub max_penetration: f64,
+    pub fallen: Vec<Fall>,
     pub sleep_enabled: bool,
     pub sleep_after: f64,
     touching: Vec<Touching>,
@@ -168,6 +169,7 @@ impl World {
             bodies: self.bodies.clone(),
             counters: self.counters.clone(),
             max_penetration: self.max_penetration,
+            fallen: self.fallen.clone(),
             sleep_enabled: self.sleep_enabled,
             sleep_after: self.sleep_after,
             touching: self.touching.clone(),
@@ -195,6 +197,7 @@ impl World {
         w.stage = StageSeconds::default();
         w.counters = ck.counters;
         w.max_penetration = ck.max_penetration;
+        w.fallen = ck.fallen;
         w.sleep_enabled = ck.sleep_enabled;
         w.sleep_after = ck.sleep_after;
         w.touching = ck.touching;
@@ -287,6 +290,14 @@ impl Checkpoint {
         }
         if self.features.iter().any(|((a, b), _)| !ok_pair(*a, *b)) {
             return bad("the feature cache names a body that does not exist");
+        }
+        let has_fallen = |f: &Fall| {
+            self.bodies
+                .get(f.body.index())
+                .is_some_and(|b| b.activity == Activity::Fallen)
+        };
+        if !self.fallen.iter().all(has_fallen) {
+            return bad("a fall names a body that does not exist or has not fallen");
         }
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return bad("dt is not a positive number");

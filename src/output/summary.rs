@@ -1,5 +1,6 @@
 //! `summary.json`: what a run did, how long it took and how it ended.
 
+use crate::step::Fall;
 use crate::step::stats::{Counters, StageSeconds};
 pub use crate::step::stats::{Distribution, RankSummary};
 use serde::{Deserialize, Serialize};
@@ -29,6 +30,11 @@ pub struct Summary {
     pub counters: Counters,
     pub bodies_resting: usize,
     pub bodies_fallen: usize,
+    /// Each body that fell below `fall_z` and the simulated time it fell at
+    /// (the end of the step that found it there), in the order they fell:
+    /// `[{ "body": i, "time": t }]`.
+    #[serde(default)]
+    pub fallen: Vec<Fall>,
     /// Stages distributed to workers, and how often each ran on rank 0 alone.
     pub distributed: Distribution,
     pub frames_rendered: u64,

@@ -4,7 +4,9 @@
 //! Every rank calls `load` itself: static shapes and masses never travel.
 //! Every problem becomes one `SceneError` naming the file and the field.
 
+pub mod bounds;
 pub mod mesh_files;
+mod overlap;
 pub mod schema;
 pub mod shapes;
 
@@ -12,6 +14,7 @@ use crate::body::mass::{MomentSum, check_inertia, principal_axes};
 use crate::body::{
     Activity, Body, BodyId, BodyKind, BodyState, BoundingSphere, ObjectDef, ObjectId, Part,
 };
+use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use schema::{CombineRule, ObjectSection, SceneFile};
@@ -48,6 +51,9 @@ pub struct Settings {
     pub duration: Option<f64>,
     pub until_rest: bool,
     pub max_duration: f64,
+    /// Dynamic bodies whose centre of mass goes below this stop being
+    /// simulated; `f64::NEG_INFINITY` when none ever does (a scene without
+    /// `fall_z` and without fixed bodies, `default_fall_z`).
     pub fall_z: f64,
     pub frame_interval: f64,
     pub restitution_rule: CombineRule,
@@ -61,6 +67,44 @@ impl Settings {
     /// Simulated time at which the run stops at the latest.
     pub fn end_time(&self) -> f64 {
         self.duration.unwrap_or(self.max_duration)
+    }
+
+    /// Steps to the end time (saturating at `u64::MAX`); a run takes them
+    /// all unless it comes to rest first.
+    pub fn total_steps(&self) -> u64 {
+        (self.end_time() / self.dt - 1e-9).ceil().max(0.0) as u64
+    }
+}
+
+/// How far below the lowest point of the fixed bodies `fall_z` lies when the
+/// scene does not set it, metres.
+pub const FALL_BELOW_FIXED: f64 = 1.0;
+
+/// `world.fall_z` when the scene does not set it: `FALL_BELOW_FIXED` below
+/// the lowest vertex of any fixed body, in world coordinates (a body that
+/// left the floor over its edge falls past its underside, not its centre),
+/// or no cut-off when no fixed body suggests a floor.
+pub fn default_fall_z(bodies: &[Body], objects: &[ObjectDef]) -> f64 {
+    let lowest = bodies
+        .iter()
+        .filter(|b| matches!(b.kind, BodyKind::Fixed))
+        .flat_map(|b| {
+            let pose = b.pose();
+            objects[b.object.0 as usize]
+                .parts
+                .iter()
+                .flat_map(move |p| {
+                    p.hull
+                        .vertices()
+                        .iter()
+                        .map(move |v| (pose * nalgebra::Point3::from(*v)).z)
+                })
+        })
+        .fold(f64::INFINITY, f64::min);
+    if lowest.is_finite() {
+        lowest - FALL_BELOW_FIXED
+    } else {
+        f64::NEG_INFINITY
     }
 }
 
@@ -169,7 +213,7 @@ fn one_line(s: &str) -> String {
 type FieldResult<T> = Result<T, (String, String)>;
 
 fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldResult<Scene> {
-    let settings = build_settings(&file)?;
+    let mut settings = build_settings(&file)?;
     let mut objects = Vec::new();
     let mut object_ids = std::collections::BTreeMap::new();
     for (index, (obj_name, section)) in file.objects.iter().enumerate() {
@@ -208,6 +252,10 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         shapes::finite_all(&b.position, &format!("{f}.position"))?;
         shapes::finite_all(&b.velocity, &format!("{f}.velocity"))?;
         shapes::finite_all(&b.angular_velocity, &format!("{f}.angular_velocity"))?;
+        let reach = bounds::reach(&objects[object.0 as usize]);
+        bounds::check_position(&b.position, &format!("{f}.position"))?;
+        bounds::check_speed(&b.velocity, &format!("{f}.velocity"))?;
+        bounds::check_spin(&b.angular_velocity, reach, &format!("{f}.angular_velocity"))?;
         let orientation = shapes::unit_quaternion(&b.orientation, &format!("{f}.orientation"))?;
         let kind = match (&b.driven, b.fixed) {
             (Some(_), true) => {
@@ -219,6 +267,12 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
             (Some(d), false) => {
                 shapes::finite_all(&d.velocity, &format!("{f}.driven.velocity"))?;
                 shapes::finite_all(&d.angular_velocity, &format!("{f}.driven.angular_velocity"))?;
+                bounds::check_speed(&d.velocity, &format!("{f}.driven.velocity"))?;
+                bounds::check_spin(
+                    &d.angular_velocity,
+                    reach,
+                    &format!("{f}.driven.angular_velocity"),
+                )?;
                 BodyKind::Driven {
                     velocity: d.velocity.into(),
                     angular_velocity: d.angular_velocity.into(),
@@ -271,6 +325,13 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         });
     }
 
+    if let Some(o) = overlap::first_overlap(&bodies, &objects) {
+        return Err(overlap_error(&o, &file, &bodies, &objects));
+    }
+    if file.world.fall_z.is_none() {
+        settings.fall_z = default_fall_z(&bodies, &objects);
+    }
+
     Ok(Scene {
         name,
         path: path.to_path_buf(),
@@ -293,7 +354,9 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
     }
     shapes::positive(w.frame_interval, "world.frame_interval")?;
     shapes::positive(w.max_duration, "world.max_duration")?;
-    shapes::finite_all(&[w.fall_z], "world.fall_z")?;
+    if let Some(z) = w.fall_z {
+        shapes::finite_all(&[z], "world.fall_z")?;
+    }
     if let Some(d) = w.duration {
         if !d.is_finite() || d < 0.0 {
             return Err((
@@ -307,6 +370,11 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
             "is required unless until_rest = true".into(),
         ));
     }
+    let steps_field = if w.duration.is_some() {
+        "world.duration"
+    } else {
+        "world.max_duration"
+    };
     if let Some(s) = file.output.sample_every {
         shapes::positive(s, "output.sample_every")?;
     }
@@ -345,19 +413,85 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
             })
         }
     };
-    Ok(Settings {
+    let settings = Settings {
         gravity: w.gravity.into(),
         dt: w.dt,
         duration: w.duration,
         until_rest: w.until_rest,
         max_duration: w.max_duration,
-        fall_z: w.fall_z,
+        // The default depends on the fixed bodies: `build` sets it.
+        fall_z: w.fall_z.unwrap_or(f64::NEG_INFINITY),
         frame_interval: w.frame_interval,
         restitution_rule: w.restitution_rule,
         friction_rule: w.friction_rule,
         sample_every: file.output.sample_every,
         render,
-    })
+    };
+    bounds::check_step_count(&settings).map_err(|m| (steps_field.to_string(), m))?;
+    Ok(settings)
+}
+
+/// One line for bodies placed inside each other: the later body's field,
+/// both bodies with their objects, and the depth.
+fn overlap_error(
+    o: &overlap::StartOverlap,
+    file: &SceneFile,
+    bodies: &[Body],
+    objects: &[ObjectDef],
+) -> (String, String) {
+    let object = |i: usize| &objects[bodies[i].object.0 as usize].name;
+    let (field_b, who_b) = match origin(o.b, file) {
+        Origin::Listed(i) => (format!("bodies[{i}]"), format!("object '{}'", object(o.b))),
+        Origin::Scattered(k) => (
+            format!("scatter[{k}]"),
+            format!("body {} (object '{}')", o.b, object(o.b)),
+        ),
+    };
+    let who_a = match origin(o.a, file) {
+        Origin::Listed(i) => format!("bodies[{i}] (object '{}')", object(o.a)),
+        Origin::Scattered(k) => format!("body {} of scatter[{k}] (object '{}')", o.a, object(o.a)),
+    };
+    (
+        field_b,
+        format!(
+            "{who_b} overlaps {who_a} by {} m at the start, more than the contact tolerance \
+             ({CONTACT_TOLERANCE:e} m); move them apart (bodies may touch)",
+            four_digits(o.depth)
+        ),
+    )
+}
+
+/// Where a body of the scene comes from.
+enum Origin {
+    /// `[[bodies]]` entry i.
+    Listed(usize),
+    /// Placed by `[[scatter]]` entry k.
+    Scattered(usize),
+}
+
+/// Body `i` in scene order: the `[[bodies]]` in file order, then each
+/// scatter's bodies in turn.
+fn origin(i: usize, file: &SceneFile) -> Origin {
+    if i < file.bodies.len() {
+        return Origin::Listed(i);
+    }
+    let mut end = file.bodies.len() as u64;
+    for (k, s) in file.scatter.iter().enumerate() {
+        end += s.count;
+        if (i as u64) < end {
+            return Origin::Scattered(k);
+        }
+    }
+    Origin::Scattered(file.scatter.len().saturating_sub(1))
+}
+
+/// `x` with four significant digits, in plain decimals (0.1500, 0.00002000).
+fn four_digits(x: f64) -> String {
+    if !(x.is_finite() && x > 0.0) {
+        return format!("{x}");
+    }
+    let decimals = (3.0 - x.log10().floor()).clamp(0.0, 20.0) as usize;
+    format!("{x:.decimals$}")
 }
 
 /// Distinct, readable colours for object definitions without `color`.
@@ -384,6 +518,10 @@ fn build_object(
     for p in &named {
         moments.add_mesh(p.hull.vertices(), &p.hull.triangles());
     }
+    bounds::check_size(
+        bounds::extent(named.iter().map(|p| &p.hull)),
+        &format!("{f}.shape"),
+    )?;
     let props = moments.finish();
     let scale = named
         .iter()
@@ -403,11 +541,14 @@ fn build_object(
         (None, None) => return Err((format!("{f}.mass"), "is required (or give density)".into())),
         (Some(m), None) => {
             shapes::positive(m, &format!("{f}.mass"))?;
+            bounds::check_mass(m, &format!("{f}.mass"), "is")?;
             m
         }
         (None, Some(d)) => {
             shapes::positive(d, &format!("{f}.density"))?;
-            d * props.volume
+            let m = d * props.volume;
+            bounds::check_mass(m, &format!("{f}.density"), "gives a mass of")?;
+            m
         }
     };
     let inertia = match &s.inertia {
@@ -696,6 +837,9 @@ fn scatter(
     shapes::finite_all(&s.min, &format!("{f}.min"))?;
     shapes::finite_all(&s.max, &format!("{f}.max"))?;
     shapes::finite_all(&s.velocity, &format!("{f}.velocity"))?;
+    bounds::check_position(&s.min, &format!("{f}.min"))?;
+    bounds::check_position(&s.max, &format!("{f}.max"))?;
+    bounds::check_speed(&s.velocity, &format!("{f}.velocity"))?;
     if (0..3).any(|k| s.min[k] > s.max[k]) {
         return Err((format!("{f}.max"), "must be ≥ min on every axis".into()));
     }

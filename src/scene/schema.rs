@@ -39,8 +39,11 @@ pub struct WorldSection {
     /// Safety cap for `until_rest` scenes that never settle (simulated s).
     #[serde(default = "default_max_duration")]
     pub max_duration: f64,
-    #[serde(default = "default_fall_z")]
-    pub fall_z: f64,
+    /// Height below which a dynamic body stops being simulated. When absent,
+    /// 1 m below the lowest point of the fixed bodies, or no cut-off in a
+    /// scene without fixed bodies (`scene::default_fall_z`).
+    #[serde(default)]
+    pub fall_z: Option<f64>,
     #[serde(default = "default_frame_interval")]
     pub frame_interval: f64,
     #[serde(default)]
@@ -57,7 +60,7 @@ impl Default for WorldSection {
             duration: None,
             until_rest: false,
             max_duration: default_max_duration(),
-            fall_z: default_fall_z(),
+            fall_z: None,
             frame_interval: default_frame_interval(),
             restitution_rule: CombineRule::Min,
             friction_rule: CombineRule::Min,
@@ -73,9 +76,6 @@ fn default_dt() -> f64 {
 }
 fn default_max_duration() -> f64 {
     600.0
-}
-fn default_fall_z() -> f64 {
-    -1.0
 }
 fn default_frame_interval() -> f64 {
     1.0 / 60.0

@@ -52,7 +52,7 @@ use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
 use region::Region;
 use stats::{Distribution, GroupWork, RankSummary};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::Instant;
 
 /// Runs the distributable stages. One rank: `Inline`; several: `cluster`.
@@ -149,6 +149,15 @@ pub const EVENTS_PER_MOVING_BODY: usize = 4;
 /// group (`Region::earlier_impact`) before it is taken as it is.
 pub(crate) const MAX_EARLIER_IMPACTS: usize = 8;
 
+/// A body that fell below `fall_z`, and when: the end of the step that
+/// found it there (`summary.json`'s `fallen`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Fall {
+    pub body: BodyId,
+    /// Simulated seconds, steps × dt.
+    pub time: f64,
+}
+
 /// The simulated world: static scene data plus the changing state.
 pub struct World {
     pub scene: Scene,
@@ -159,6 +168,9 @@ pub struct World {
     pub counters: Counters,
     /// Largest overlap seen at the end of any step, metres.
     pub max_penetration: f64,
+    /// The bodies that fell below `fall_z`, in the order they fell (by
+    /// body id within a step).
+    pub fallen: Vec<Fall>,
     /// Enables resting systems (on by default; analytic tests may switch it off).
     pub sleep_enabled: bool,
     pub sleep_after: f64,
@@ -205,6 +217,7 @@ impl World {
             stage: StageSeconds::default(),
             counters: Counters::default(),
             max_penetration: 0.0,
+            fallen: Vec::new(),
             sleep_enabled: true,
             sleep_after: 0.5,
             skip_separating: true,
@@ -281,6 +294,7 @@ impl World {
             pair_forces: BTreeMap::new(),
         };
         let first = self.steps == 0;
+        let fallen_before = world.counters.bodies_fallen;
         let result = frame::step_world(
             &mut world,
             &mut self.touching,
@@ -306,7 +320,24 @@ impl World {
             .into_iter()
             .map(|((a, b), f)| (a, b, f))
             .collect();
+        if self.counters.bodies_fallen > fallen_before {
+            self.record_falls();
+        }
         result
+    }
+
+    /// Notes the time of the bodies the step just taken found below
+    /// `fall_z` (`Region::update_rest_and_falls`, at the step's end, counts
+    /// each in `bodies_fallen` as it marks it fallen).
+    fn record_falls(&mut self) {
+        let known: BTreeSet<BodyId> = self.fallen.iter().map(|f| f.body).collect();
+        let time = self.time();
+        for (i, b) in self.bodies.iter().enumerate() {
+            let body = BodyId(i as u32);
+            if b.activity == Activity::Fallen && !known.contains(&body) {
+                self.fallen.push(Fall { body, time });
+            }
+        }
     }
 
     /// A 64-bit FNV-1a hash of the exact bits of every body's state, as hex.
@@ -333,7 +364,14 @@ impl World {
         (self.bodies[body].pose() * Point3::from(local)).coords
     }
 }
-/// Stops the run when a state is non-finite or faster than 10⁶ m/s,
+/// The speed no body may reach, m/s: a step that produces one stops the run
+/// (`check_states`), and a scene that starts with one is refused
+/// (`scene::load`). The fastest bodies the tests throw move at a thousandth
+/// of it (1000 m/s at a 1 cm wall); at 10⁶ m/s a 10 ms step carries a body
+/// 10 km.
+pub const MAX_SPEED: f64 = 1e6;
+
+/// Stops the run when a state is non-finite or faster than `MAX_SPEED`,
 /// naming the stage that produced it: `solve_islands` right after a
 /// contact solve (impulses), `integrate` at the end of the step (forces,
 /// including a scene's own `[[forces]]`, acting over it). `states` are
@@ -350,7 +388,7 @@ pub(crate) fn check_states<'a>(
             && s.orientation.coords.iter().all(|x| x.is_finite());
         let detail = if !finite {
             "has a non-finite state".to_string()
-        } else if s.velocity.norm() > 1e6 {
+        } else if s.velocity.norm() > MAX_SPEED {
             format!("exploded (speed {:.3e} m/s)", s.velocity.norm())
         } else {
             continue;
