@@ -4,13 +4,14 @@
 //! properties), `collision` (broadphase, V-Clip, contact points), `contact`
 //! (islands, Dantzig LCP), `dynamics` (integration), `step` (the frame loop),
 //! `cluster` (everything MPI), `render` (off-screen frames), `output`
-//! (trajectory, summary, progress).
+//! (trajectory, summary, progress), `export` (a scene as JSON for other tools).
 
 pub mod body;
 pub mod cluster;
 pub mod collision;
 pub mod contact;
 pub mod dynamics;
+pub mod export;
 pub mod output;
 pub mod render;
 pub mod run;

@@ -1,10 +1,15 @@
-//! `rigidsim SCENE.toml [options]`, alone or under `mpirun -np N`.
+//! `rigidsim [run] SCENE.toml [options]`, alone or under `mpirun -np N`, and
+//! `rigidsim export SCENE.toml --to FILE`.
+//!
+//! Each subcommand is one function below; only `run` starts MPI, so the
+//! others work without mpirun. `rigidsim SCENE …` (no subcommand) is
+//! `rigidsim run SCENE …`, the form every script used before subcommands.
 //!
 //! Exit status: 0 done, 2 bad input (scene, mesh, options, a refused
 //! `--resume` checkpoint), 3 the run went numerically wrong (outputs written
 //! so far and the last checkpoint are kept), 1 anything else.
 
-use clap::Parser;
+use clap::{Args, Parser, Subcommand};
 use mpi::topology::Communicator;
 use mpi::traits::Root;
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
@@ -16,8 +21,30 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser, Debug)]
-#[command(version, about = "Rigid-body dynamics over an MPI cluster of lab PCs")]
+#[command(
+    version,
+    about = "Rigid-body dynamics over an MPI cluster of lab PCs",
+    // `rigidsim SCENE [options]` is `rigidsim run SCENE [options]`.
+    args_conflicts_with_subcommands = true,
+    subcommand_negates_reqs = true
+)]
 struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    run: Option<RunArgs>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Simulate a scene, alone or under mpirun (the default command).
+    Run(RunArgs),
+    /// Write a scene's bodies, exactly as rigidsim simulates them, as JSON (no MPI).
+    Export(ExportArgs),
+}
+
+#[derive(Args, Debug)]
+struct RunArgs {
     /// Scene file (TOML).
     scene: PathBuf,
     /// Output folder (default out/<scene name>/).
@@ -57,6 +84,15 @@ struct Cli {
     resume: Option<PathBuf>,
 }
 
+#[derive(Args, Debug)]
+struct ExportArgs {
+    /// Scene file (TOML).
+    scene: PathBuf,
+    /// JSON file to write (format in README.md, "rigidsim export").
+    #[arg(long, value_name = "FILE")]
+    to: PathBuf,
+}
+
 fn parse_slow(s: &str) -> Result<(i32, f64), String> {
     let (r, f) = s
         .split_once('=')
@@ -78,6 +114,40 @@ fn main() -> ExitCode {
             return ExitCode::from(code);
         }
     };
+    match (cli.command, cli.run) {
+        (Some(Command::Run(args)), _) | (None, Some(args)) => run_scene(args),
+        (Some(Command::Export(args)), _) => export_scene(args),
+        (None, None) => {
+            use clap::CommandFactory;
+            let e = Cli::command().error(
+                clap::error::ErrorKind::MissingRequiredArgument,
+                "a scene file is required: rigidsim [run] SCENE.toml [options]",
+            );
+            let _ = e.print();
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// `rigidsim export`: loads the scene as `run` does (same one-line error,
+/// exit 2) and writes its JSON; never starts MPI.
+fn export_scene(args: ExportArgs) -> ExitCode {
+    let scene = match rigidsim::scene::load(&args.scene) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("rigidsim: error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = rigidsim::export::write(&scene, &args.to) {
+        eprintln!("rigidsim: error: cannot write {}: {e}", args.to.display());
+        return ExitCode::from(1);
+    }
+    ExitCode::SUCCESS
+}
+
+/// `rigidsim run` (and the short form): every rank of the MPI job, or the only one.
+fn run_scene(cli: RunArgs) -> ExitCode {
     let Some(universe) = mpi::initialize() else {
         eprintln!("rigidsim: MPI could not be initialised");
         return ExitCode::from(1);
