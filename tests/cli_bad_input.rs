@@ -404,6 +404,34 @@ fn cube_with(extra: &str) -> String {
     one_object(&format!("{CUBE}\nmass = 1.0")) + extra + "\n"
 }
 
+/// Issue 23's absurd numbers, for what accelerates bodies: `gravity =
+/// [0, 0, -1e308]` loaded and failed at t = 0 with exit status 3. Gravity,
+/// or a force on the body it pushes, above 10⁹ m/s² (10⁸ g) is bad input
+/// naming the field; a strong but sane force runs.
+#[test]
+fn absurd_gravity_and_forces_are_bad_input() {
+    let heavy = cube_with("").replace("[world]\n", "[world]\ngravity = [0.0, 0.0, -1e308]\n");
+    let line = assert_refused(&Case::new(&heavy), &["world.gravity", "1e9 m/s²"]);
+    assert!(!line.contains("numerical failure"), "{line}");
+    for (force, field) in [
+        ("force = [1e30, 0.0, 0.0]", "forces[0].force"),
+        (
+            "force = [0.0, 0.0, 0.0]\ntorque = [0.0, 0.0, 1e30]",
+            "forces[0].torque",
+        ),
+    ] {
+        let scene = cube_with(&format!("\n[[forces]]\nbody = 0\n{force}\n"));
+        let line = assert_refused(&Case::new(&scene), &[field, "1e9 m/s²"]);
+        assert!(!line.contains("numerical failure"), "{line}");
+    }
+    // 1000 N on the 1 kg cube: 10³ m/s², well inside the bound.
+    let sane = Case::new(&cube_with(
+        "\n[[forces]]\nbody = 0\nforce = [1000.0, 0.0, 0.0]\n",
+    ));
+    let o = sane.run(&["--duration", "0.02"]);
+    assert_eq!(o.code, Some(0), "stderr:\n{}", o.stderr);
+}
+
 /// Issue 23: `velocity = [1e308, 0, 0]` loaded, then failed at t = 0 with
 /// exit status 3 ("numerical failure … solve_islands"). A speed above the
 /// step's own bound (10⁶ m/s), or a spin at which the body's surface would

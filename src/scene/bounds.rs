@@ -43,7 +43,29 @@ pub const MAX_MASS: f64 = 1e12;
 /// for a pile of bodies: a longer run is a typo, not a plan.
 pub const MAX_STEPS: u64 = 1_000_000_000;
 
+/// Largest acceleration gravity or a force may give a body, m/s² (10⁸ g):
+/// even at it a body takes a millisecond to reach the speed bound, where
+/// `gravity = [0, 0, -1e308]` went past it in the first step.
+pub const MAX_ACCELERATION: f64 = 1e9;
+
 type Checked = Result<(), (String, String)>;
+
+/// A linear acceleration (gravity, or a force over the mass it pushes) of
+/// at most `MAX_ACCELERATION`; `what` says what gives it.
+pub fn check_acceleration(a: f64, field: &str, what: &str) -> Checked {
+    if a > MAX_ACCELERATION {
+        return Err((
+            field.into(),
+            format!("{what} {a:.3e} m/s², more than the {MAX_ACCELERATION:e} m/s² bound"),
+        ));
+    }
+    Ok(())
+}
+
+/// |v| of a vector given as three numbers (as the scene file has them).
+pub fn magnitude(v: &[f64; 3]) -> f64 {
+    norm(v)
+}
 
 /// Every coordinate within ±`MAX_COORDINATE`.
 pub fn check_position(p: &[f64; 3], field: &str) -> Checked {

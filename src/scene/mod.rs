@@ -312,6 +312,21 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         shapes::finite_all(&f.force, &format!("{field}.force"))?;
         shapes::finite_all(&f.torque, &format!("{field}.torque"))?;
         shapes::finite_all(&[f.start], &format!("{field}.start"))?;
+        // What the force does to the body it pushes: its centre's
+        // acceleration, and its surface's from the torque (about the axis
+        // it turns hardest about).
+        let o = &objects[bodies[f.body as usize].object.0 as usize];
+        bounds::check_acceleration(
+            bounds::magnitude(&f.force) / o.mass,
+            &format!("{field}.force"),
+            &format!("accelerates body {} ({} kg) at", f.body, o.mass),
+        )?;
+        let turn = bounds::magnitude(&f.torque) / o.principal_moments.min() * bounds::reach(o);
+        bounds::check_acceleration(
+            turn,
+            &format!("{field}.torque"),
+            &format!("accelerates body {}'s surface at", f.body),
+        )?;
         let end = f.end.unwrap_or(f64::INFINITY);
         if end.is_nan() || end <= f.start {
             return Err((format!("{field}.end"), "must be later than start".into()));
@@ -345,6 +360,11 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
 fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
     let w = &file.world;
     shapes::finite_all(&w.gravity, "world.gravity")?;
+    bounds::check_acceleration(
+        bounds::magnitude(&w.gravity),
+        "world.gravity",
+        "accelerates bodies at",
+    )?;
     shapes::positive(w.dt, "world.dt")?;
     if w.dt > 1.0 {
         return Err((
