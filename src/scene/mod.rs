@@ -314,7 +314,7 @@ fn build(file: SceneFile, base_dir: &Path, name: String, path: &Path) -> FieldRe
         shapes::finite_all(&[f.start], &format!("{field}.start"))?;
         // What the force does to the body it pushes: its centre's
         // acceleration, and its surface's from the torque (about the axis
-        // it turns hardest about).
+        // it turns most easily about: the smallest principal moment).
         let o = &objects[bodies[f.body as usize].object.0 as usize];
         bounds::check_acceleration(
             bounds::magnitude(&f.force) / o.mass,
