@@ -84,7 +84,7 @@ fn command(ranks: Ranks, scene: &Path, out: &Path, args: &[&str]) -> Command {
         .arg("--no-progress")
         .args(args)
         // Open MPI refuses root without these (CI containers run as root);
-        // Mesa's device-select layer is noise without a desktop session.
+        // Mesa's device-select layer is noise without a desktop.
         .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
         .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
         .env("NODEVICE_SELECT", "1")

@@ -468,23 +468,8 @@ impl<'w> MpiExecutor<'w> {
             if idx.is_empty() {
                 continue;
             }
-            let rank = self.roles.workers[k - 1];
-            let Some((rs, busy)) = unpack(self.receive(rank)) else {
-                eprintln!("rigidsim: rank 0: rank {rank} answered the wrong message");
-                self.world.abort(4);
-            };
-            if rs.len() != idx.len() {
-                eprintln!(
-                    "rigidsim: rank 0: rank {rank} returned {} results for {} tasks",
-                    rs.len(),
-                    idx.len()
-                );
-                self.world.abort(4);
-            }
-            let cost: f64 = idx.iter().map(|&i| costs[i]).sum();
-            self.book[k].busy_s += busy;
+            let (rs, busy) = self.gather(k, idx, costs, &unpack);
             total_busy += busy;
-            self.meter(k, cost, busy);
             for (r, &i) in rs.into_iter().zip(idx) {
                 results[i] = r;
             }
@@ -594,23 +579,8 @@ impl<'w> MpiExecutor<'w> {
         macro_rules! take_reply {
             ($k:expr) => {{
                 let chunk = held[$k].pop_front().expect("a chunk is held");
-                let rank = self.roles.workers[slots[$k] - 1];
-                let Some((rs, busy)) = unpack(self.receive(rank)) else {
-                    eprintln!("rigidsim: rank 0: rank {rank} answered the wrong message");
-                    self.world.abort(4);
-                };
-                if rs.len() != chunk.len() {
-                    eprintln!(
-                        "rigidsim: rank 0: rank {rank} returned {} results for {} tasks",
-                        rs.len(),
-                        chunk.len()
-                    );
-                    self.world.abort(4);
-                }
-                let cost: f64 = chunk.iter().map(|&i| costs[i]).sum();
-                self.book[slots[$k]].busy_s += busy;
+                let (rs, busy) = self.gather(slots[$k], &chunk, costs, &unpack);
                 total_busy += busy;
-                self.meter(slots[$k], cost, busy);
                 for (r, i) in rs.into_iter().zip(chunk) {
                     results[i] = Some(r);
                 }
@@ -659,6 +629,35 @@ impl<'w> MpiExecutor<'w> {
             .map(|r| r.expect("every task answered"))
             .collect();
         (results, total_busy + own_s, own)
+    }
+
+    /// Slot `slot`'s answer to its `tasks` (indices into `costs`): received,
+    /// checked to be the stage's reply with one result per task, and its
+    /// busy time booked and metered. Returns the results and that time.
+    fn gather<R>(
+        &mut self,
+        slot: usize,
+        tasks: &[usize],
+        costs: &[f64],
+        unpack: &impl Fn(Reply) -> Option<(Vec<R>, f64)>,
+    ) -> (Vec<R>, f64) {
+        let rank = self.roles.workers[slot - 1];
+        let Some((rs, busy)) = unpack(self.receive(rank)) else {
+            eprintln!("rigidsim: rank 0: rank {rank} answered the wrong message");
+            self.world.abort(4);
+        };
+        if rs.len() != tasks.len() {
+            eprintln!(
+                "rigidsim: rank 0: rank {rank} returned {} results for {} tasks",
+                rs.len(),
+                tasks.len()
+            );
+            self.world.abort(4);
+        }
+        let cost: f64 = tasks.iter().map(|&i| costs[i]).sum();
+        self.book[slot].busy_s += busy;
+        self.meter(slot, cost, busy);
+        (rs, busy)
     }
 
     /// Updates a slot's speed from its batches (see `SpeedMeter`). The cost
