@@ -167,7 +167,7 @@ fn resumed_world_ends_with_the_same_state_hash() {
 }
 
 /// The fall times `summary.json` lists (`World::fallen`) are part of the
-/// checkpoint (format 8): resumed before, between and after two falls
+/// checkpoint (since format 8): resumed before, between and after two falls
 /// beside a floor, a run lists the same falls at the same times.
 #[test]
 fn fall_times_survive_a_resume() {

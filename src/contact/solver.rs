@@ -159,7 +159,20 @@ pub struct SolveStats {
     /// (exact and compliant) and the sequential impulses then solved to
     /// the LCP's conditions (not counted in `failed`).
     pub iterative_rescues: u32,
+    /// Sweeps of the iterative solves and rescues, all together (their
+    /// cost: a sweep is one pass over the rows; the energy guard's safe
+    /// answer is not counted).
+    pub iterative_sweeps: u64,
+    /// Rows of the largest system solved.
+    pub largest_rows: u32,
+    /// Systems of `LARGE_SYSTEM_ROWS` rows or more.
+    pub large_systems: u32,
 }
+
+/// Rows from which a system counts in `SolveStats::large_systems`: where
+/// Dantzig's method stops being cheap (a system of 300 rows takes it about
+/// 0.1 s, docs/architecture.md).
+pub const LARGE_SYSTEM_ROWS: usize = 300;
 
 /// Failure examples kept in `SolveStats::failures`.
 pub const FAILURES_KEPT: usize = 32;
@@ -186,6 +199,9 @@ impl SolveStats {
         self.iterative_solves += o.iterative_solves;
         self.iterative_unconverged += o.iterative_unconverged;
         self.iterative_rescues += o.iterative_rescues;
+        self.iterative_sweeps += o.iterative_sweeps;
+        self.largest_rows = self.largest_rows.max(o.largest_rows);
+        self.large_systems += o.large_systems;
     }
 }
 
@@ -530,6 +546,10 @@ fn solve_phase(
     }
     let m = rows.len();
     stats.rows += m as u32;
+    stats.largest_rows = stats.largest_rows.max(m as u32);
+    if m >= LARGE_SYSTEM_ROWS {
+        stats.large_systems += 1;
+    }
     let normal_sum = |p: &[f64]| {
         p.iter()
             .zip(&findex)
@@ -559,7 +579,9 @@ fn solve_phase(
     let mut unconverged = None;
     if m >= task.iterative_min_rows as usize {
         stats.iterative_solves += 1;
-        let (p, met) = sequential_impulses(&rows, &diag, &rhs, &lo, &hi, &findex, &warm, v.len());
+        let (p, met, sweeps) =
+            sequential_impulses(&rows, &diag, &rhs, &lo, &hi, &findex, &warm, v.len());
+        stats.iterative_sweeps += sweeps as u64;
         if !met {
             stats.iterative_unconverged += 1;
         }
@@ -621,8 +643,9 @@ fn solve_phase(
             Err(_) => match unconverged
                 .is_none()
                 .then(|| sequential_impulses(&rows, &diag, &rhs, &lo, &hi, &findex, &warm, v.len()))
-                .filter(|&(_, met)| met)
-                .map(|(p, _)| p)
+                .inspect(|&(_, _, sweeps)| stats.iterative_sweeps += sweeps as u64)
+                .filter(|&(_, met, _)| met)
+                .map(|(p, _, _)| p)
             {
                 Some(p) => {
                     stats.iterative_rescues += 1;
@@ -712,7 +735,8 @@ fn guard_iterative(
             .map(|f| if f.is_none() { f64::INFINITY } else { 0.0 })
             .collect();
         let zero = vec![0.0; m];
-        let (p, _) = sequential_impulses(rows, diag, vel, &zero, &normal_hi, findex, &zero, bodies);
+        let (p, _, _) =
+            sequential_impulses(rows, diag, vel, &zero, &normal_hi, findex, &zero, bodies);
         vec![("the frictionless inelastic answer", p)]
     })
 }
@@ -978,7 +1002,8 @@ const SUBSPACE_REJECTIONS: usize = 3;
 /// contacts took in their last solve. A pile or a stack at rest needs
 /// nearly the same impulses every step, so the sweeps start with the right
 /// rows pushing. Returns the impulses and whether they meet the LCP's
-/// conditions to the tolerance (`ITERATIVE_RESIDUAL`, `ITERATIVE_FLOOR`).
+/// conditions to the tolerance (`ITERATIVE_RESIDUAL`, `ITERATIVE_FLOOR`),
+/// and the sweeps it took.
 #[allow(clippy::too_many_arguments)]
 fn sequential_impulses(
     rows: &[Row],
@@ -989,7 +1014,7 @@ fn sequential_impulses(
     findex: &[Option<usize>],
     warm: &[f64],
     bodies: usize,
-) -> (Vec<f64>, bool) {
+) -> (Vec<f64>, bool, u32) {
     let m = rows.len();
     let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
     let system = IterativeSystem {
@@ -1022,12 +1047,12 @@ fn sequential_impulses(
     for sweep in 0..ITERATIVE_SWEEPS {
         if sweep % ITERATIVE_CHECK_EVERY == 0 {
             if system.met(&state) {
-                return (state.p, true);
+                return (state.p, true, sweep as u32);
             }
             if sweep > 0 && steps_left > 0 && rejected_in_a_row < SUBSPACE_REJECTIONS {
                 steps_left -= 1;
                 match system.subspace_step(&by_body, &mut state) {
-                    Step::Kept if system.met(&state) => return (state.p, true),
+                    Step::Kept if system.met(&state) => return (state.p, true, sweep as u32),
                     Step::Kept => rejected_in_a_row = 0,
                     Step::Rejected => rejected_in_a_row += 1,
                     Step::NotTaken => {}
@@ -1037,7 +1062,7 @@ fn sequential_impulses(
         system.sweep(&mut state);
     }
     let met = system.met(&state);
-    (state.p, met)
+    (state.p, met, ITERATIVE_SWEEPS as u32)
 }
 
 /// The boxed LCP the iterative solve works on, w = (A + c·diag) p + b with
@@ -1279,7 +1304,7 @@ mod tests {
             .iter()
             .copied()
             .collect();
-        let (p, met) = sequential_impulses(
+        let (p, met, _) = sequential_impulses(
             &rows,
             &diag,
             &b,
@@ -1329,6 +1354,82 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A frictionless stack of `n` 1 kg bodies at rest on a fixed floor, as
+    /// an island task (resting phase only: nothing approaches).
+    fn resting_stack_task(n: usize, iterative_min_rows: u32) -> IslandTask {
+        let floor = IslandBody {
+            id: BodyId(0),
+            inv_mass: 0.0,
+            inv_inertia: Matrix3::zeros(),
+            position: Vector3::zeros(),
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+            external_dv: Vector3::zeros(),
+            external_dw: Vector3::zeros(),
+        };
+        let mut bodies = vec![floor.clone()];
+        for k in 1..=n {
+            bodies.push(IslandBody {
+                id: BodyId(k as u32),
+                inv_mass: 1.0,
+                inv_inertia: Matrix3::identity() * 6.0,
+                position: Vector3::new(0.0, 0.0, k as f64 - 0.5),
+                external_dv: Vector3::new(0.0, 0.0, -9.81 * 0.01),
+                ..floor.clone()
+            });
+        }
+        let contacts = (0..n)
+            .map(|k| IslandContact {
+                a: k as u32 + 1,
+                b: k as u32,
+                point: Vector3::new(0.0, 0.0, k as f64),
+                normal: Vector3::z(),
+                restitution: 0.0,
+                friction: 0.0,
+                separation: 0.0,
+                warm_force: 0.0,
+                warm_friction: Vector3::zeros(),
+                turns: NormalTurn::WithB,
+            })
+            .collect();
+        IslandTask {
+            bodies,
+            contacts,
+            dt: 0.01,
+            restitution_threshold: 0.05,
+            iterative_min_rows,
+        }
+    }
+
+    /// The system sizes and sweeps a solve reports (`summary.json`'s
+    /// `counters.solve`): a stack of 320 frictionless bodies is one system
+    /// of 320 rows, large, solved iteratively to the LCP's conditions in
+    /// fewer sweeps than the cap, carrying the stack's weight;
+    /// a stack of 40 solved by Dantzig's method takes no sweeps.
+    #[test]
+    fn solve_stats_report_system_sizes_and_sweeps() {
+        let r = solve_island(&resting_stack_task(320, ITERATIVE_MIN_ROWS as u32));
+        let s = &r.stats;
+        assert_eq!((s.lcp_solves, s.iterative_solves, s.iterative_unconverged), (0, 1, 0));
+        assert_eq!((s.largest_rows, s.large_systems), (320, 1));
+        assert!(s.iterative_sweeps > 0 && s.iterative_sweeps < ITERATIVE_SWEEPS as u64);
+        // The compliance (`ITERATIVE_COMPLIANCE`) costs a chain this long
+        // up to 1e-4 of its load: its smallest eigenvalue is about 1.2e-5
+        // of its diagonal, so c = 1e-9 moves the load by up to
+        // c / 1.2e-5 ≈ 8e-5 (as in `subspace_step_carries_a_tall_stack_from_any_start`).
+        let bottom = r.contact_force[0];
+        assert!((bottom - 320.0 * 9.81).abs() <= 1e-4 * bottom, "{bottom} N");
+
+        let r = solve_island(&resting_stack_task(40, ITERATIVE_MIN_ROWS as u32));
+        let s = &r.stats;
+        assert_eq!((s.lcp_solves, s.iterative_solves, s.iterative_sweeps), (1, 0, 0));
+        assert_eq!((s.largest_rows, s.large_systems), (40, 0));
+        let mut all = SolveStats::default();
+        all.add(&solve_island(&resting_stack_task(320, 300)).stats);
+        all.add(&s.clone());
+        assert_eq!((all.largest_rows, all.large_systems), (320, 1));
     }
 
     /// A 1 kg body falling at 1 m/s onto the ground through two identical
