@@ -299,6 +299,89 @@ enum Phase<'a> {
 
 /// Solves one island: impact impulses, then resting forces.
 pub fn solve_island(task: &IslandTask) -> IslandResult {
+    let Some(merged) = merge_coincident_contacts(task) else {
+        return solve_distinct(task);
+    };
+    let mut r = solve_distinct(&merged.task);
+    // Each merged contact's force goes to the first of its copies (which
+    // warm-starts the merged contact again next step: see
+    // `merge_coincident_contacts`).
+    let force = std::mem::take(&mut r.contact_force);
+    let friction = std::mem::take(&mut r.contact_friction);
+    for &(k, first) in &merged.into {
+        r.contact_force.push(if first { force[k] } else { 0.0 });
+        r.contact_friction.push(if first { friction[k] } else { Vector3::zeros() });
+    }
+    r
+}
+
+/// Contacts closer than this (metres) with normals closer than this count
+/// as one: the copies a body made of convex parts gives where two parts
+/// share a vertex (a nut of 32 parts lying flat had up to 98 points on the
+/// floor; one in sixteen of a settling pile's points was such a copy, equal
+/// to rounding).
+const COINCIDENT: f64 = 1e-9;
+
+/// An island with its coincident contacts merged, and where each of the
+/// original contacts went (index in the merged task, first copy or not).
+struct MergedIsland {
+    task: IslandTask,
+    into: Vec<(usize, bool)>,
+}
+
+/// Merges contacts of one pair at the same point with the same normal, or
+/// None if there are none. They are the same row of the LCP twice (the same
+/// Jacobian, normal and friction directions), so merging them changes no
+/// body's motion: impulses on identical rows act only through their sum,
+/// a sum within friction bounds μ(p₁ + p₂) splits into shares within
+/// μp₁ and μp₂, and of two targets the more demanding one decides (the
+/// copy with the smaller target ends with p = 0), so the merged contact
+/// keeps the deeper separation. What it removes is the redundancy: a system
+/// with rows repeated is singular, which Dantzig's method meets as broken
+/// pivots and compliant retries. The warm starts add up.
+fn merge_coincident_contacts(task: &IslandTask) -> Option<MergedIsland> {
+    let mut contacts: Vec<IslandContact> = Vec::with_capacity(task.contacts.len());
+    let mut into = Vec::with_capacity(task.contacts.len());
+    // A pair's contacts are consecutive in the task (`Region::contact_phase`).
+    let mut pair_start = 0;
+    for c in &task.contacts {
+        if contacts
+            .last()
+            .is_some_and(|last: &IslandContact| (last.a, last.b) != (c.a, c.b))
+        {
+            pair_start = contacts.len();
+        }
+        let copy_of = contacts[pair_start..].iter().position(|k| {
+            (k.a, k.b) == (c.a, c.b)
+                && (k.point - c.point).norm() <= COINCIDENT
+                && (k.normal - c.normal).norm() <= COINCIDENT
+        });
+        match copy_of {
+            Some(k) => {
+                let kept = &mut contacts[pair_start + k];
+                kept.separation = kept.separation.min(c.separation);
+                kept.warm_force += c.warm_force;
+                kept.warm_friction += c.warm_friction;
+                into.push((pair_start + k, false));
+            }
+            None => {
+                into.push((contacts.len(), true));
+                contacts.push(c.clone());
+            }
+        }
+    }
+    (contacts.len() < task.contacts.len()).then(|| MergedIsland {
+        task: IslandTask {
+            bodies: task.bodies.clone(),
+            contacts,
+            ..*task
+        },
+        into,
+    })
+}
+
+/// `solve_island` on an island without coincident contacts.
+fn solve_distinct(task: &IslandTask) -> IslandResult {
     let n = task.bodies.len();
     let mut out = IslandResult {
         impulse: vec![Vector3::zeros(); n],
@@ -1430,6 +1513,91 @@ mod tests {
         all.add(&solve_island(&resting_stack_task(320, 300)).stats);
         all.add(&s.clone());
         assert_eq!((all.largest_rows, all.large_systems), (320, 1));
+    }
+
+    /// A 1 kg cube resting on a fixed floor on its four bottom corners,
+    /// pushed sideways by less than friction holds (μ = 0.5, push 0.3 g),
+    /// solved (resting phase) with every corner given twice (the
+    /// copies 2 µm deeper at two corners) and with the copies merged by
+    /// hand: the same forces on the cube to the LCP's tolerance, the
+    /// deeper separation deciding, and each copy's force on its first.
+    #[test]
+    fn coincident_contacts_are_one_row() {
+        let floor = IslandBody {
+            id: BodyId(0),
+            inv_mass: 0.0,
+            inv_inertia: Matrix3::zeros(),
+            position: Vector3::new(0.0, 0.0, -1.0),
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+            external_dv: Vector3::zeros(),
+            external_dw: Vector3::zeros(),
+        };
+        let cube = IslandBody {
+            id: BodyId(1),
+            inv_mass: 1.0,
+            inv_inertia: Matrix3::identity() * 6.0,
+            position: Vector3::new(0.0, 0.0, 0.5),
+            external_dv: Vector3::new(0.3 * 9.81, 0.0, -9.81) * 0.01,
+            ..floor.clone()
+        };
+        let corner = |x: f64, y: f64, separation: f64| IslandContact {
+            a: 1,
+            b: 0,
+            point: Vector3::new(x, y, 0.0),
+            normal: Vector3::z(),
+            restitution: 0.0,
+            friction: 0.5,
+            separation,
+            warm_force: 0.0,
+            warm_friction: Vector3::zeros(),
+            turns: NormalTurn::WithB,
+        };
+        let corners = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)];
+        let deeper = |k: usize| if k < 2 { -2e-6 } else { 0.0 };
+        let task = |contacts: Vec<IslandContact>| IslandTask {
+            bodies: vec![floor.clone(), cube.clone()],
+            contacts,
+            dt: 0.01,
+            restitution_threshold: 0.05,
+            iterative_min_rows: ITERATIVE_MIN_ROWS as u32,
+        };
+        let twice = task(
+            corners
+                .iter()
+                .enumerate()
+                .flat_map(|(k, &(x, y))| [corner(x, y, 0.0), corner(x, y, deeper(k))])
+                .collect(),
+        );
+        let once = task(
+            corners
+                .iter()
+                .enumerate()
+                .map(|(k, &(x, y))| corner(x, y, deeper(k)))
+                .collect(),
+        );
+        let merged = solve_island(&twice);
+        let unmerged = solve_distinct(&twice);
+        let by_hand = solve_distinct(&once);
+        assert_eq!(merged.stats.rows, 12, "four contacts of three rows, one phase");
+        assert_eq!(unmerged.stats.rows, 24);
+        assert_eq!(merged.force, by_hand.force);
+        assert_eq!(merged.torque, by_hand.torque);
+        // The copies hold the same total on the cube (Dantzig's answer on
+        // 24 rows, verified to its tolerance of 1e-9 of the system's scale).
+        let weight = 9.81;
+        for (f, g) in merged.force.iter().zip(&unmerged.force) {
+            assert!((f - g).norm() <= 1e-8 * weight, "{f:?} against {g:?}");
+        }
+        for (t, u) in merged.torque.iter().zip(&unmerged.torque) {
+            assert!((t - u).norm() <= 1e-8 * weight, "{t:?} against {u:?}");
+        }
+        // Friction holds the push: the cube takes 0.3 of its weight sideways.
+        assert!((merged.force[1].x + 0.3 * weight).abs() <= 1e-9 * weight);
+        for k in 0..4 {
+            assert_eq!(merged.contact_force[2 * k], by_hand.contact_force[k]);
+            assert_eq!(merged.contact_force[2 * k + 1], 0.0);
+        }
     }
 
     /// A 1 kg body falling at 1 m/s onto the ground through two identical
