@@ -112,18 +112,24 @@ function quaternionAt(k, body, out) {
   return out.set(orientations[j], orientations[j + 1], orientations[j + 2], orientations[j + 3]).normalize();
 }
 
-/// Body `body` at time t: centre of mass, orientation, speed.
-function bodyState(body, t) {
+/// Body `body` at time t: its centre of mass into `position`, its
+/// orientation into `orientation`; returns its speed.
+function bodyStateInto(body, t, position, orientation) {
   const [k, f] = sampleAt(t);
   const k1 = Math.min(k + 1, times.length - 1);
   const a = 3 * (k * bodyCount + body), b = 3 * (k1 * bodyCount + body);
-  const position = new THREE.Vector3(
+  position.set(
     positions[a] + f * (positions[b] - positions[a]),
     positions[a + 1] + f * (positions[b + 1] - positions[a + 1]),
     positions[a + 2] + f * (positions[b + 2] - positions[a + 2]));
-  const orientation = new THREE.Quaternion().slerpQuaternions(
-    quaternionAt(k, body, qa), quaternionAt(k1, body, qb), f);
-  const speed = speeds[k * bodyCount + body] + f * (speeds[k1 * bodyCount + body] - speeds[k * bodyCount + body]);
+  orientation.slerpQuaternions(quaternionAt(k, body, qa), quaternionAt(k1, body, qb), f);
+  const s0 = speeds[k * bodyCount + body], s1 = speeds[k1 * bodyCount + body];
+  return s0 + f * (s1 - s0);
+}
+
+function bodyState(body, t) {
+  const position = new THREE.Vector3(), orientation = new THREE.Quaternion();
+  const speed = bodyStateInto(body, t, position, orientation);
   return { position, orientation, speed };
 }
 
@@ -135,16 +141,19 @@ let currentTime = 0;
 let picked = -1;
 let framesDrawn = 0;
 
+const place = new THREE.Vector3();
+const turn = new THREE.Quaternion();
+const white = new THREE.Color(1, 1, 1);
 function placeBodies(t) {
   for (const mesh of meshes) {
     const { bodies, colour: base } = mesh.userData;
     for (let k = 0; k < bodies.length; k++) {
       const body = bodies[k];
-      const s = bodyState(body, t);
-      matrix.compose(s.position, s.orientation, one);
+      bodyStateInto(body, t, place, turn);
+      matrix.compose(place, turn, one);
       mesh.setMatrixAt(k, matrix);
-      colour.copy(hasFallen(body, t, s.position.z) ? FALLEN_GREY : base);
-      if (body === picked) colour.lerp(new THREE.Color(1, 1, 1), PICK_LIGHTEN);
+      colour.copy(hasFallen(body, t, place.z) ? FALLEN_GREY : base);
+      if (body === picked) colour.lerp(white, PICK_LIGHTEN);
       mesh.setColorAt(k, colour);
     }
     mesh.instanceMatrix.needsUpdate = true;
@@ -304,17 +313,27 @@ function resize() {
 window.addEventListener('resize', resize);
 
 let lastFrame = null;
+// The bodies are placed again only when the time or the picked body changed:
+// a paused replay of many bodies costs only the draw while the camera turns.
+let placedAt = null, placedPick = null;
+let updateMs = 0;
 function frame(now) {
+  const started = performance.now();
   if (playing && lastFrame !== null) {
     currentTime = Math.min(currentTime + ((now - lastFrame) / 1000) * speed, endTime);
     if (currentTime >= endTime) setPlaying(false);
   }
   lastFrame = now;
-  placeBodies(currentTime);
-  showTime();
+  if (currentTime !== placedAt || picked !== placedPick) {
+    placeBodies(currentTime);
+    placedAt = currentTime;
+    placedPick = picked;
+    showTime();
+    drawEnergy();
+  }
   showPicked();
-  drawEnergy();
   controls.update();
+  updateMs = performance.now() - started;
   renderer.render(scene, camera);
   framesDrawn++;
   requestAnimationFrame(frame);
@@ -331,6 +350,9 @@ window.rigidsimReplay = {
   endTime,
   speeds: SPEEDS,
   framesDrawn: () => framesDrawn,
+  /// Milliseconds the last frame spent in the viewer's own code (placing
+  /// bodies, panels, plot), before three.js drew it.
+  updateMs: () => updateMs,
   time: () => currentTime,
   setTime: (t) => { setPlaying(false); setTime(t); },
   sliderMax: () => Number(slider.max),
