@@ -264,8 +264,12 @@ canvas.addEventListener('pointerup', (e) => {
 const energyCanvas = document.getElementById('energy');
 const kinetic = header.kinetic_j, potential = header.potential_j;
 const total = kinetic.map((k, i) => k + potential[i]);
-const energyMin = Math.min(0, ...kinetic, ...potential, ...total);
-const energyMax = Math.max(1e-12, ...kinetic, ...potential, ...total);
+// Loops, not Math.min(...series): a long run's series would overflow the
+// argument list.
+let energyMin = 0, energyMax = 1e-12;
+for (const series of [kinetic, potential, total]) {
+  for (const e of series) { energyMin = Math.min(energyMin, e); energyMax = Math.max(energyMax, e); }
+}
 const plotMargin = { left: 8, right: 8, top: 20, bottom: 16 };
 function drawEnergy() {
   const ratio = window.devicePixelRatio || 1;
