@@ -30,6 +30,9 @@ const positions = view(header.positions, Float32Array);
 const orientations = view(header.orientations, Int16Array);
 const speeds = view(header.speeds, Float32Array);
 const bodyCount = header.bodies;
+// A run resumed into a new folder starts its trajectory at the checkpoint's
+// time: the replay spans the samples there are.
+const startTime = times[0];
 const endTime = times[times.length - 1];
 
 function decodeBase64(text) {
@@ -137,7 +140,7 @@ function hasFallen(body, t, z) {
   return header.body_kind[body] === 'dynamic' && (fellAt[body] <= t || z < fallZ);
 }
 
-let currentTime = 0;
+let currentTime = startTime;
 let picked = -1;
 let framesDrawn = 0;
 
@@ -194,6 +197,7 @@ const speedSelect = document.getElementById('speed');
 const slider = document.getElementById('time');
 const clock = document.getElementById('clock');
 const pickedPanel = document.getElementById('picked');
+slider.min = String(startTime);
 slider.max = String(endTime);
 document.getElementById('scene-name').textContent = header.scene;
 document.getElementById('facts').textContent =
@@ -204,7 +208,7 @@ let playing = false;
 let speed = 1;
 function setPlaying(on) {
   playing = on && times.length > 1;
-  if (playing && currentTime >= endTime) currentTime = 0;
+  if (playing && currentTime >= endTime) currentTime = startTime;
   playButton.textContent = playing ? 'pause' : 'play';
 }
 playButton.addEventListener('click', () => setPlaying(!playing));
@@ -215,7 +219,7 @@ window.addEventListener('keydown', (e) => {
 });
 
 function setTime(t) {
-  currentTime = Math.min(Math.max(t, 0), endTime);
+  currentTime = Math.min(Math.max(t, startTime), endTime);
 }
 
 const digits = endTime < 100 ? 3 : 2;
@@ -278,10 +282,11 @@ function drawEnergy() {
   const g = energyCanvas.getContext('2d');
   g.setTransform(ratio, 0, 0, ratio, 0, 0);
   g.clearRect(0, 0, w, h);
-  const x = (t) => plotMargin.left + (endTime > 0 ? t / endTime : 0) * (w - plotMargin.left - plotMargin.right);
+  const span = endTime - startTime;
+  const x = (t) => plotMargin.left + (span > 0 ? (t - startTime) / span : 0) * (w - plotMargin.left - plotMargin.right);
   const y = (e) => h - plotMargin.bottom - ((e - energyMin) / (energyMax - energyMin)) * (h - plotMargin.top - plotMargin.bottom);
   g.strokeStyle = '#c5cbd3'; g.lineWidth = 1;
-  g.beginPath(); g.moveTo(x(0), y(0)); g.lineTo(x(endTime), y(0)); g.stroke();
+  g.beginPath(); g.moveTo(x(startTime), y(0)); g.lineTo(x(endTime), y(0)); g.stroke();
   for (const [series, style] of [[total, TOTAL_COLOUR], [potential, POTENTIAL_COLOUR], [kinetic, KINETIC_COLOUR]]) {
     g.strokeStyle = style; g.lineWidth = 1.5; g.beginPath();
     series.forEach((e, i) => (i ? g.lineTo(x(times[i]), y(e)) : g.moveTo(x(times[i]), y(e))));
@@ -297,14 +302,14 @@ function drawEnergy() {
   g.fillStyle = POTENTIAL_COLOUR; g.fillText(`potential ${formatJ(at(potential))}`, 112, 4);
   g.fillStyle = TOTAL_COLOUR; g.fillText(`total ${formatJ(at(total))}`, 232, 4);
   g.fillStyle = '#566'; g.textBaseline = 'bottom';
-  g.fillText('0 s', plotMargin.left, h - 1);
+  g.fillText(`${startTime.toFixed(digits)} s`, plotMargin.left, h - 1);
   g.textAlign = 'right'; g.fillText(`${endTime.toFixed(digits)} s`, w - plotMargin.right, h - 1); g.textAlign = 'left';
 }
 function formatJ(e) { return `${Math.abs(e) >= 1000 ? e.toFixed(0) : e.toPrecision(3)} J`; }
 energyCanvas.addEventListener('click', (e) => {
   const rect = energyCanvas.getBoundingClientRect();
   const fraction = (e.clientX - rect.left - plotMargin.left) / (rect.width - plotMargin.left - plotMargin.right);
-  setTime(fraction * endTime);
+  setTime(startTime + fraction * (endTime - startTime));
 });
 
 // ---- the frame loop ---------------------------------------------------------
