@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Installs what rigidsim needs on Debian (once): Open MPI, libclang for rsmpi's
 # bindings, Mesa's CPU Vulkan driver for off-screen rendering, ffmpeg for
-# video, fontconfig and a font for benchmark plots. Safe to run again: installs only what is missing.
+# video, fontconfig and a font for benchmark plots, and for the browser test of
+# `rigidsim view`'s replay page: Chromium, Node.js and npm, then the viewer's
+# npm packages (viewer/node_modules, from viewer/package-lock.json). Safe to
+# run again: installs only what is missing.
 set -euo pipefail
 
 need=()
@@ -14,6 +17,10 @@ command -v ffmpeg >/dev/null 2>&1 || need+=(ffmpeg)
 dpkg -s libfontconfig1-dev >/dev/null 2>&1 || need+=(libfontconfig1-dev)
 command -v pkg-config >/dev/null 2>&1 || need+=(pkg-config)
 dpkg -s fonts-dejavu-core >/dev/null 2>&1 || need+=(fonts-dejavu-core)
+# The replay page's browser test (viewer/test/replay_in_chromium.mjs).
+command -v chromium >/dev/null 2>&1 || need+=(chromium)
+command -v node >/dev/null 2>&1 || need+=(nodejs)
+command -v npm >/dev/null 2>&1 || need+=(npm)
 
 if [ ${#need[@]} -gt 0 ]; then
   echo "setup: installing ${need[*]}" >&2
@@ -23,11 +30,21 @@ if [ ${#need[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
 fi
 
+# The viewer's packages: playwright-core drives Chromium in the browser test;
+# three and esbuild rebuild the committed bundle (viewer/build.mjs). Installed
+# again only when the lock file is newer than the last install.
+viewer_dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/viewer"
+if [ ! -f "$viewer_dir/node_modules/.installed" ] || [ "$viewer_dir/package-lock.json" -nt "$viewer_dir/node_modules/.installed" ]; then
+  echo "setup: installing the viewer's npm packages (viewer/package-lock.json)" >&2
+  (cd "$viewer_dir" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+  touch "$viewer_dir/node_modules/.installed"
+fi
+
 if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: cargo not found; install Rust (https://rustup.rs) and run again" >&2
   exit 1
 fi
 
 # Open MPI refuses to run as root unless told; the CPU Vulkan driver's
-# device-select layer prints noise without a desktop session.
+# device-select layer prints noise where no desktop runs.
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 NODEVICE_SELECT=1

@@ -36,6 +36,16 @@ check "state_hash equal on 1, 2, 3 ranks" bash -c "[ -n \"\$(cat $tmp/det1/summa
   [ \"$(hash_of $tmp/det1 2>/dev/null)\" = \"$(hash_of $tmp/det2 2>/dev/null)\" ] && \
   [ \"$(hash_of $tmp/det1 2>/dev/null)\" = \"$(hash_of $tmp/det3 2>/dev/null)\" ]"
 
+# The replay page (`rigidsim view`) in a real browser: headless Chromium with
+# software WebGL opens the page of a small run and checks that a body is drawn
+# where the trajectory puts it at t = 0 and at the end, that playing stops at
+# the run's end time, that picking works, and that nothing is fetched or
+# logged as an error. The committed bundle must be what viewer/src builds.
+check "viewer bundle built from viewer/src" bash -c "cd viewer && node build.mjs --check"
+check "replay page in headless chromium" bash -c "$bin scenes/render_check.toml --no-render --no-progress --out $tmp/replay >/dev/null 2>&1 && \
+  $bin view scenes/render_check.toml $tmp/replay >/dev/null && \
+  node viewer/test/replay_in_chromium.mjs --page $tmp/replay/replay.html --run $tmp/replay --body 1"
+
 # Every benchmark once on a tiny setting, so none can rot (timings are not checked).
 check "bench_accuracy --tiny" bash scripts/bench_accuracy.sh --tiny
 check "bench_scaling --tiny" bash scripts/bench_scaling.sh --tiny

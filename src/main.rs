@@ -1,13 +1,17 @@
-//! `rigidsim [run] SCENE.toml [options]`, alone or under `mpirun -np N`, and
-//! `rigidsim export SCENE.toml --to FILE`.
+//! `rigidsim [run] SCENE.toml [options]`, alone or under `mpirun -np N`,
+//! `rigidsim export SCENE.toml --to FILE` and
+//! `rigidsim view SCENE.toml OUT_DIR [--serve PORT]`.
 //!
 //! Each subcommand is one function below; only `run` starts MPI, so the
 //! others work without mpirun. `rigidsim SCENE …` (no subcommand) is
 //! `rigidsim run SCENE …`, the form every script used before subcommands.
 //!
 //! Exit status: 0 done, 2 bad input (scene, mesh, options, a refused
-//! `--resume` checkpoint), 3 the run went numerically wrong (outputs written
-//! so far and the last checkpoint are kept), 1 anything else.
+//! `--resume` checkpoint, an output folder `view` refuses), 3 the run went
+//! numerically wrong (outputs written so far and the last checkpoint are
+//! kept), 1 anything else.
+
+mod view;
 
 use clap::{Args, Parser, Subcommand};
 use mpi::topology::Communicator;
@@ -41,6 +45,9 @@ enum Command {
     Run(RunArgs),
     /// Write a scene's bodies, exactly as rigidsim simulates them, as JSON (no MPI).
     Export(ExportArgs),
+    /// Write OUT_DIR/replay.html, a replay of a finished run of the scene for
+    /// any browser (one self-contained file; no MPI).
+    View(ViewArgs),
 }
 
 #[derive(Args, Debug)]
@@ -93,6 +100,18 @@ struct ExportArgs {
     to: PathBuf,
 }
 
+#[derive(Args, Debug)]
+struct ViewArgs {
+    /// Scene file (TOML) the run was made from.
+    scene: PathBuf,
+    /// The run's output folder (the one `rigidsim SCENE --out` wrote).
+    out_dir: PathBuf,
+    /// Then serve the page on 127.0.0.1:PORT (0: any free port) until stopped,
+    /// for a browser on another machine through ssh port forwarding.
+    #[arg(long, value_name = "PORT")]
+    serve: Option<u16>,
+}
+
 fn parse_slow(s: &str) -> Result<(i32, f64), String> {
     let (r, f) = s
         .split_once('=')
@@ -117,6 +136,7 @@ fn main() -> ExitCode {
     match (cli.command, cli.run) {
         (Some(Command::Run(args)), _) | (None, Some(args)) => run_scene(args),
         (Some(Command::Export(args)), _) => export_scene(args),
+        (Some(Command::View(args)), _) => view_run(args),
         (None, None) => {
             use clap::CommandFactory;
             let e = Cli::command().error(
@@ -144,6 +164,24 @@ fn export_scene(args: ExportArgs) -> ExitCode {
         return ExitCode::from(1);
     }
     ExitCode::SUCCESS
+}
+
+/// `rigidsim view`: writes the replay and prints its path (then serves it,
+/// with `--serve`); a refused folder or scene is one line and exit 2.
+fn view_run(args: ViewArgs) -> ExitCode {
+    let fail = |e: view::ViewError| {
+        eprintln!("rigidsim: error: {e}");
+        ExitCode::from(e.exit_code())
+    };
+    let page = match view::write_replay(&args.scene, &args.out_dir) {
+        Ok(p) => p,
+        Err(e) => return fail(e),
+    };
+    println!("{}", page.display());
+    match args.serve.map(|port| view::serve(&page, port)) {
+        Some(Err(e)) => fail(e),
+        _ => ExitCode::SUCCESS,
+    }
 }
 
 /// `rigidsim run` (and the short form): every rank of the MPI job, or the only one.

@@ -5,7 +5,7 @@
 use crate::body::{Activity, BodyKind};
 use crate::output::checkpoint::{self, Checkpoint, RunMarks};
 use crate::output::progress::Progress;
-use crate::output::summary::{RankSummary, Summary};
+use crate::output::summary::{self, RankSummary, Summary};
 use crate::output::trajectory::{Continued, TrajectoryWriter};
 use crate::output::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::render;
@@ -463,6 +463,7 @@ pub fn run_coordinator(
     let mut notes = Vec::new();
 
     let settings = scene.settings.clone();
+    let (scene_path, scene_digest) = summary::scene_file_identity(&scene.path);
     // The last good checkpoint: the one resumed from, then each one written.
     let mut last_good: Option<(PathBuf, f64)> = None;
     let (mut world, marks, mut traj, continued) = match resume {
@@ -653,6 +654,8 @@ pub fn run_coordinator(
 
     let summary = Summary {
         scene: world.scene.name.clone(),
+        scene_path,
+        scene_digest,
         ranks: per_rank.len() as u32,
         bodies: world.bodies.len(),
         steps: world.steps,

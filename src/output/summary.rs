@@ -4,10 +4,21 @@ use crate::step::Fall;
 use crate::step::stats::{Counters, StageSeconds};
 pub use crate::step::stats::{Distribution, RankSummary};
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Summary {
     pub scene: String,
+    /// The scene file the run was loaded from (absolute where it could be
+    /// resolved, as given otherwise), and the FNV-1a 64 of its bytes as 16 hex
+    /// digits (`scene_digest`). `rigidsim view` refuses an output folder whose
+    /// digest is not that of the scene it is given. `None` in summaries
+    /// written before these fields existed, or if the file could not be read
+    /// again when the run started.
+    #[serde(default)]
+    pub scene_path: Option<String>,
+    #[serde(default)]
+    pub scene_digest: Option<String>,
     pub ranks: u32,
     pub bodies: usize,
     pub steps: u64,
@@ -42,4 +53,28 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub render_adapter: Option<String>,
     pub notes: Vec<String>,
+}
+
+/// The FNV-1a 64 of a scene file's bytes, 16 hex digits: `summary.json`'s
+/// `scene_digest`. It tells apart the scenes a folder could have been written
+/// from (an edited copy, another scene); it is no defence against a forger.
+pub fn scene_digest(bytes: &[u8]) -> String {
+    let mut h = super::FNV_OFFSET;
+    super::fnv1a(&mut h, bytes);
+    format!("{h:016x}")
+}
+
+/// `summary.json`'s `scene_path` and `scene_digest` for the scene at `path`,
+/// read when the run starts. Both `None` if the file cannot be read again.
+pub fn scene_file_identity(path: &Path) -> (Option<String>, Option<String>) {
+    match std::fs::read(path) {
+        Ok(bytes) => {
+            let shown = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+            (
+                Some(shown.display().to_string()),
+                Some(scene_digest(&bytes)),
+            )
+        }
+        Err(_) => (None, None),
+    }
 }
