@@ -180,6 +180,26 @@ pub struct LcpProblem<'a> {
     /// `findex[i] = Some(j)`: row i is a friction row bounded by row j's impulse;
     /// j must not itself be a friction row. Empty means no friction rows.
     pub findex: &'a [Option<usize>],
+    /// A's factors where A = J M⁻¹ Jᵀ, or None (see [`RowFactors`]).
+    pub factors: Option<RowFactors<'a>>,
+}
+
+/// A = J M⁻¹ Jᵀ off its diagonal as its factors, for systems whose rows
+/// each act on two bodies (contacts): row i's Jacobian on its two bodies
+/// and the velocity change M⁻¹Jᵀ a unit impulse on it gives them. With
+/// them the drive's Δw over the not-clamped rows costs O(rows + |C|) (the
+/// bodies' velocity change from Δx_C, then each row's share of it) instead
+/// of O(rows · |C|) through A's entries. A's diagonal may differ from the
+/// factors' (compliance): Δw is only taken for rows that do not move.
+#[derive(Clone, Copy, Debug)]
+pub struct RowFactors<'a> {
+    pub bodies: usize,
+    /// Per row, the two bodies it acts on (indices below `bodies`).
+    pub body: &'a [[u32; 2]],
+    /// Per row and body, J: linear then angular part.
+    pub jacobian: &'a [[[f64; 6]; 2]],
+    /// Per row and body, M⁻¹Jᵀ: the linear then angular velocity change.
+    pub response: &'a [[[f64; 6]; 2]],
 }
 
 impl<'a> LcpProblem<'a> {
@@ -191,6 +211,7 @@ impl<'a> LcpProblem<'a> {
             lo: &[],
             hi: &[],
             findex: &[],
+            factors: None,
         }
     }
 
@@ -202,12 +223,21 @@ impl<'a> LcpProblem<'a> {
             lo,
             hi,
             findex: &[],
+            factors: None,
         }
     }
 
     /// The same problem with friction rows (see [`LcpProblem::findex`]).
     pub fn with_friction(self, findex: &'a [Option<usize>]) -> Self {
         Self { findex, ..self }
+    }
+
+    /// The same problem with A's factors (see [`RowFactors`]).
+    pub fn with_factors(self, factors: RowFactors<'a>) -> Self {
+        Self {
+            factors: Some(factors),
+            ..self
+        }
     }
 
     /// Number of rows n.
@@ -720,6 +750,8 @@ pub struct LcpWorkspace {
     dxc: Vec<f64>,
     /// Δw of not-clamped rows for the current direction.
     dw: Vec<f64>,
+    /// The bodies' velocity change of the current direction (with `RowFactors`).
+    du: Vec<f64>,
     /// L⁻¹ A_Cd and D⁻¹ L⁻¹ A_Cd of the current direction (factor order).
     y: Vec<f64>,
     z: Vec<f64>,
@@ -743,6 +775,7 @@ struct Ctx<'a> {
     b: &'a [f64],
     opts: &'a LcpOptions,
     refactor: bool,
+    factors: Option<RowFactors<'a>>,
 }
 
 impl LcpWorkspace {
@@ -764,6 +797,7 @@ impl LcpWorkspace {
             clamped: Vec::new(),
             dxc: Vec::new(),
             dw: Vec::new(),
+            du: Vec::new(),
             y: Vec::new(),
             z: Vec::new(),
             factor: Factor::new(),
@@ -800,6 +834,7 @@ impl LcpWorkspace {
             b: problem.b,
             opts: options,
             refactor: options.factorization == Factorization::Refactor || !self.symmetric,
+            factors: problem.factors,
         };
         let has_friction = problem.findex.iter().any(Option::is_some);
         let passes = if has_friction {
@@ -917,6 +952,20 @@ impl LcpWorkspace {
         };
         if let Some(i) = p.a.iter().position(|v| !v.is_finite()) {
             return Err(non_finite("a", i));
+        }
+        if let Some(f) = p.factors {
+            if f.body.len() != n || f.jacobian.len() != n || f.response.len() != n {
+                return Err(invalid(format!("factors do not have {n} rows")));
+            }
+            if let Some(i) = f.body.iter().position(|b| b.iter().any(|&k| k as usize >= f.bodies)) {
+                return Err(invalid(format!("factors: row {i} names a body past {}", f.bodies)));
+            }
+            let finite = |rows: &[[[f64; 6]; 2]]| {
+                rows.iter().position(|r| r.iter().flatten().any(|v| !v.is_finite()))
+            };
+            if let Some(i) = finite(f.jacobian).or(finite(f.response)) {
+                return Err(non_finite("factors", i));
+            }
         }
         if let Some(i) = p.b.iter().position(|v| !v.is_finite()) {
             return Err(non_finite("b", i));
@@ -1299,6 +1348,37 @@ impl LcpWorkspace {
     /// Δw_k = dir · A_kd + A_kC Δx_C for every not-clamped processed row.
     fn delta_w(&mut self, ctx: Ctx, d: usize, dir: f64) {
         let m = self.clamped.len();
+        if let Some(f) = ctx.factors {
+            self.du.clear();
+            self.du.resize(6 * f.bodies, 0.0);
+            let du = &mut self.du;
+            let mut push = |row: usize, x: f64| {
+                for side in 0..2 {
+                    let at = 6 * f.body[row][side] as usize;
+                    for (u, r) in du[at..at + 6].iter_mut().zip(&f.response[row][side]) {
+                        *u += r * x;
+                    }
+                }
+            };
+            push(d, dir);
+            for (&c, &dx) in self.clamped.iter().zip(&self.dxc[..m]) {
+                push(c, dx);
+            }
+            for k in 0..self.n {
+                if matches!(
+                    self.state[k],
+                    RowState::AtLo | RowState::AtHi | RowState::Free
+                ) {
+                    let mut s = 0.0;
+                    for side in 0..2 {
+                        let at = 6 * f.body[k][side] as usize;
+                        s += dot(&f.jacobian[k][side], &self.du[at..at + 6]);
+                    }
+                    self.dw[k] = s;
+                }
+            }
+            return;
+        }
         for k in 0..self.n {
             if matches!(
                 self.state[k],
