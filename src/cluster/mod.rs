@@ -178,10 +178,13 @@ const SELF_SCHEDULED_SHARE: f64 = 1.0;
 /// Chunks of group steps a worker holds at most: the one it steps and the
 /// next, so it never waits for rank 0 between them.
 const CHUNKS_IN_FLIGHT: usize = 1;
-/// A chunk holds at least this share of the work not yet handed out,
-/// divided by the ranks taking part (guided self-scheduling): large chunks
-/// while much is left, few messages; small ones at the end, where an
-/// estimate that was off could leave a rank waiting.
+/// A chunk holds at least this share of the work not yet handed out, times
+/// the worker's share of the speed of the ranks taking part (guided
+/// self-scheduling): large chunks while much is left, few messages; small
+/// ones at the end, where an estimate that was off could leave a rank
+/// waiting. By speed, because a stage often ends with every worker's first
+/// chunk: equal chunks gave a rank measured 3× slower as much work as the
+/// others, and the stage waited for it.
 const CHUNK_SHARE: f64 = 0.5;
 
 /// A request on its way to a worker, sent without blocking: MPI reads the
@@ -215,13 +218,14 @@ impl Feed {
         }
     }
 
-    /// The next chunk for a worker: the largest tasks left, at least one,
-    /// up to `CHUNK_SHARE` of what is left per rank.
-    fn chunk(&mut self, costs: &[f64], ranks: usize) -> Option<Vec<usize>> {
+    /// The next chunk for a worker whose share of the ranks' speed is
+    /// `share`: the largest tasks left, at least one, up to `CHUNK_SHARE`
+    /// of that share of what is left.
+    fn chunk(&mut self, costs: &[f64], share: f64) -> Option<Vec<usize>> {
         if self.front == self.back {
             return None;
         }
-        let target = CHUNK_SHARE * self.left_s / ranks as f64;
+        let target = CHUNK_SHARE * self.left_s * share;
         let mut chunk = Vec::new();
         let mut cost = 0.0;
         while self.front < self.back
@@ -548,7 +552,13 @@ impl<'w> MpiExecutor<'w> {
     ) -> (Vec<R>, f64, Vec<usize>) {
         let used = schedule::fastest_slots(&self.speeds, workers);
         let slots: Vec<usize> = (1..self.speeds.len()).filter(|&s| used[s]).collect();
-        let ranks = slots.len() + 1;
+        // Each worker's share of the speed of the ranks taking part.
+        let total_speed = self.speeds[0] * SELF_SCHEDULED_SHARE
+            + slots.iter().map(|&s| self.speeds[s]).sum::<f64>();
+        let speed_share: Vec<f64> = slots
+            .iter()
+            .map(|&s| self.speeds[s] / total_speed)
+            .collect();
         let mut feed = Feed::new(costs);
         let mut tasks: Vec<Option<T>> = tasks.into_iter().map(Some).collect();
         let mut results: Vec<Option<R>> = (0..tasks.len()).map(|_| None).collect();
@@ -560,7 +570,7 @@ impl<'w> MpiExecutor<'w> {
         macro_rules! refill {
             ($k:expr) => {
                 while held[$k].len() < CHUNKS_IN_FLIGHT {
-                    let Some(chunk) = feed.chunk(costs, ranks) else {
+                    let Some(chunk) = feed.chunk(costs, speed_share[$k]) else {
                         break;
                     };
                     let share: Vec<T> = chunk
