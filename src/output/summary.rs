@@ -25,7 +25,7 @@ pub struct Summary {
     pub energy_initial_j: f64,
     pub energy_final_j: f64,
     pub stage_seconds: StageSeconds,
-    pub per_rank: Vec<RankSummary>,
+    pub per_rank: Vec<RankLine>,
     pub state_hash: String,
     pub counters: Counters,
     pub bodies_resting: usize,
@@ -42,4 +42,64 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub render_adapter: Option<String>,
     pub notes: Vec<String>,
+}
+
+/// One entry of `per_rank`: the rank's own account (its fields at the top
+/// level, as before) and where it ran: its host and what it sent and
+/// received per frame (one step of the frame loop, SPEC 2.1).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct RankLine {
+    #[serde(flatten)]
+    pub account: RankSummary,
+    /// The rank's host name (on a lab from `scripts/lab.sh`, its "PC").
+    #[serde(default)]
+    pub host: String,
+    #[serde(default)]
+    pub bytes_sent_per_frame: f64,
+    #[serde(default)]
+    pub bytes_received_per_frame: f64,
+    /// Rate of the link between rank 0 and this rank, bytes per second,
+    /// measured at start-up; absent for rank 0, the renderer, and ranks
+    /// reached through shared memory (no slower than an empty message).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_bytes_per_s: Option<f64>,
+}
+
+/// Where a rank ran, as rank 0 learnt at start-up.
+#[derive(Clone, Debug, Default)]
+pub struct RankHost {
+    pub host: String,
+    pub link_bytes_per_s: Option<f64>,
+}
+
+impl RankLine {
+    /// `account`'s line, on `hosts[account.rank]` (unknown if absent), over
+    /// a run of `frames` frames.
+    pub fn new(account: RankSummary, hosts: &[RankHost], frames: u64) -> RankLine {
+        let at = hosts
+            .get(account.rank as usize)
+            .cloned()
+            .unwrap_or_default();
+        let per_frame = |bytes: u64| {
+            if frames > 0 {
+                bytes as f64 / frames as f64
+            } else {
+                0.0
+            }
+        };
+        RankLine {
+            host: at.host,
+            bytes_sent_per_frame: per_frame(account.bytes_sent),
+            bytes_received_per_frame: per_frame(account.bytes_received),
+            link_bytes_per_s: at.link_bytes_per_s,
+            account,
+        }
+    }
+}
+
+impl std::ops::Deref for RankLine {
+    type Target = RankSummary;
+    fn deref(&self) -> &RankSummary {
+        &self.account
+    }
 }
