@@ -73,8 +73,9 @@ PY
   lab --hosts 3 --fault down:3@3 "$tmp/crowd200.toml" --no-render --no-progress --duration 60 \
     --out "$tmp/down/fault" >"$tmp/down/log" 2>&1 || true
   check "lab: a PC's cable pulled mid-run ends the job within 15 s, naming it" ended_in_time "$tmp/down/log" 3 2
+  check "bench_network --tiny" bash scripts/bench_network.sh --tiny
 else
-  echo "skipped: lab tests (2 PCs over ssh and TCP, faults across hosts): $why"
+  echo "skipped: lab tests (2 PCs over ssh and TCP, faults across hosts, bench_network --tiny): $why"
 fi
 
 # Every benchmark once on a tiny setting, so none can rot (timings are not checked).

@@ -676,7 +676,7 @@ pub fn run_coordinator(
         stage_seconds: world.stage.clone(),
         per_rank: per_rank
             .into_iter()
-            .map(|r| RankLine::new(r, hosts, world.steps))
+            .map(|r| RankLine::new(r, hosts, world.steps.div_ceil(frame_stride)))
             .collect(),
         state_hash: world.state_hash(),
         counters: world.counters.clone(),

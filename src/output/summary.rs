@@ -46,7 +46,8 @@ pub struct Summary {
 
 /// One entry of `per_rank`: the rank's own account (its fields at the top
 /// level, as before) and where it ran: its host and what it sent and
-/// received per frame (one step of the frame loop, SPEC 2.1).
+/// received per frame (`frame_interval_s` of simulated time, the frames
+/// `worst_frame_s` times; a last, partial frame counts as one).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct RankLine {
     #[serde(flatten)]
