@@ -120,7 +120,7 @@ cleanup() {
   local p n
   for p in $fault_pid $mpirun_pid "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
   # Whatever else runs in a lab PC was started by this lab (orted, ranks,
-  # ssh sessions): end it by id before its namespace goes.
+  # ssh logins): end it by id before its namespace goes.
   for n in "${made_ns[@]}"; do
     for p in $(ip netns pids "$n" 2>/dev/null); do kill -9 "$p" 2>/dev/null || true; done
   done
@@ -200,7 +200,7 @@ AllowTcpForwarding no
 PidFile none
 AcceptEnv OMPI_* NODEVICE_SELECT
 EOF
-  # The PC's own host name: a UTS namespace for its sshd and every session.
+  # The PC's own host name: a UTS namespace for its sshd and every login.
   ip netns exec "$(ns "$i")" unshare --uts sh -c \
     "hostname pc$i && exec /usr/sbin/sshd -D -e -f $dir/sshd_pc$i.conf" 2>>"$dir/sshd_pc$i.log" &
   pids+=($!)

@@ -49,5 +49,5 @@ if ! command -v cargo >/dev/null 2>&1; then
 fi
 
 # Open MPI refuses to run as root unless told; the CPU Vulkan driver's
-# device-select layer prints noise without a desktop session.
+# device-select layer prints noise without a desktop.
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 NODEVICE_SELECT=1

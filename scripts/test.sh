@@ -55,8 +55,8 @@ import json, sys
 ranks = json.load(open(sys.argv[1]))["per_rank"]
 assert [r["host"] for r in ranks] == ["pc1", "pc2"], ranks
 assert ranks[1]["bytes_received_per_frame"] > 0, ranks
-# 100 Mbit/s is 12.5 MB/s; TCP and the echo's round trip take some of it.
-assert 1e6 < ranks[1]["link_bytes_per_s"] < 1.3e7, ranks
+# 100 Mbit/s is 12.5 MB/s (TCP and busy cores take some of it); shared memory is > 100 MB/s.
+assert 1e6 < ranks[1]["link_bytes_per_s"] < 5e7, ranks
 PY
   }
   check "lab: 2 PCs over ssh and TCP, state_hash as on 1 rank" same_as_one_rank

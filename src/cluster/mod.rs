@@ -1014,7 +1014,7 @@ enum Stage {
 /// 100 Mbit/s link (5 ms each way) stands well above a round trip's, small
 /// enough that three per worker over 10 Mbit/s take a third of a second.
 const PROBE_BYTES: usize = 64 * 1024;
-/// Probes per worker (the median is kept).
+/// Probes of each size per worker (the fastest is kept).
 const PROBES: usize = 3;
 
 /// What the network costs, for the byte term of the cost model and for
@@ -1069,30 +1069,32 @@ impl MpiExecutor<'_> {
         rates
     }
 
-    /// Each worker's link rate: the median time of `PROBES` echoes of
-    /// `PROBE_BYTES`, less the empty round trip, for twice the payload.
-    /// Their bytes are not booked (they are not the run's traffic).
+    /// Each worker's link rate: twice `PROBE_BYTES` over the time an echo
+    /// of them takes beyond an empty echo, each the fastest of `PROBES`
+    /// (interleaved). The fastest, not the median: on shared cores a
+    /// sample's extra time is mostly the worker waiting for a core, which
+    /// says nothing of the link. Their bytes are not booked (they are not
+    /// the run's traffic).
     fn measure_link_rates(&mut self) {
-        let payload = vec![0u8; PROBE_BYTES];
-        let mut rates = vec![f64::INFINITY; self.roles.workers.len() + 1];
         let booked = self.book.clone();
+        let mut rates = vec![f64::INFINITY; self.roles.workers.len() + 1];
         for (k, &w) in self.roles.workers.clone().iter().enumerate() {
-            let mut samples = Vec::new();
+            let (mut empty, mut full) = (f64::INFINITY, f64::INFINITY);
             for _ in 0..PROBES {
-                let t = Instant::now();
-                self.send(
-                    w,
-                    &Req::Probe {
-                        payload: payload.clone(),
-                    },
-                );
-                let _ = self.receive(w);
-                samples.push(t.elapsed().as_secs_f64());
+                for (bytes, best) in [(0, &mut empty), (PROBE_BYTES, &mut full)] {
+                    let t = Instant::now();
+                    self.send(
+                        w,
+                        &Req::Probe {
+                            payload: vec![0u8; bytes],
+                        },
+                    );
+                    let _ = self.receive(w);
+                    *best = best.min(t.elapsed().as_secs_f64());
+                }
             }
-            samples.sort_by(f64::total_cmp);
-            let carried = samples[samples.len() / 2] - self.latency_s;
-            if carried > 0.0 {
-                rates[k + 1] = 2.0 * PROBE_BYTES as f64 / carried;
+            if full > empty {
+                rates[k + 1] = 2.0 * PROBE_BYTES as f64 / (full - empty);
             }
         }
         for (b, old) in self.book.iter_mut().zip(booked) {

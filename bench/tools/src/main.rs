@@ -92,6 +92,15 @@ fn main() {
     for m in &missing {
         eprintln!("report: no summary for {m} (failed or cut off)");
     }
+    if !runs.is_empty() && runs.iter().all(|r| r.series == "network") {
+        // scripts/bench_network.sh: network.{csv,md,png} only; the other
+        // series' files of an earlier run stay as they are.
+        network(&runs, &out);
+        for m in &missing {
+            eprintln!("report: left out of network.md: {m}");
+        }
+        return;
+    }
     let mut md = String::new();
     load_profile(&runs, &out, &mut md);
     scaling(&runs, &out, &mut md);
@@ -100,14 +109,6 @@ fn main() {
     real_cores_pour(&runs, &out, &mut md);
     pours(&runs, &out, &mut md);
     network(&runs, &out);
-    if md.is_empty() {
-        // Only the network series (scripts/bench_network.sh): its own
-        // network.md; the scaling report of an earlier run stays.
-        for m in &missing {
-            eprintln!("report: left out of network.md: {m}");
-        }
-        return;
-    }
     if !missing.is_empty() {
         let _ = writeln!(
             md,
@@ -1020,9 +1021,15 @@ fn network(runs: &[Run], out: &Path) {
          narrowphase / solve / groups distributed |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     // Per scene and link: (PCs, value) for the figure; one PC joins every link's line.
-    let mut wall: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    let mut bytes: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    let mut dist: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    // Lines in the order of the table (by bodies, then link).
+    type Lines = Vec<(String, Vec<(f64, f64)>)>;
+    fn add(lines: &mut Lines, label: &str, point: (f64, f64)) {
+        match lines.iter_mut().find(|(l, _)| l == label) {
+            Some((_, points)) => points.push(point),
+            None => lines.push((label.to_string(), vec![point])),
+        }
+    }
+    let (mut wall, mut bytes, mut dist): (Lines, Lines, Lines) = Default::default();
     let links: Vec<String> = {
         let mut l: Vec<String> = rs
             .iter()
@@ -1108,39 +1115,33 @@ fn network(runs: &[Run], out: &Path) {
             vec![format!("{bodies} bodies, {link}")]
         };
         for line in lines {
-            wall.entry(line.clone())
-                .or_default()
-                .push((*pcs as f64, per_sim));
+            add(&mut wall, &line, (*pcs as f64, per_sim));
             if *pcs > 1 {
-                bytes
-                    .entry(line.clone())
-                    .or_default()
-                    .push((*pcs as f64, bpf));
-                dist.entry(line).or_default().push((*pcs as f64, gr));
+                add(&mut bytes, &line, (*pcs as f64, bpf));
+                add(&mut dist, &line, (*pcs as f64, gr));
             }
         }
     }
     std::fs::write(out.join("network.csv"), csv).expect("write network.csv");
     std::fs::write(out.join("network.md"), md).expect("write network.md");
-    let panel =
-        |title: &str, y: &str, y_log: bool, lines: BTreeMap<String, Vec<(f64, f64)>>| plot::Panel {
-            title: title.into(),
-            x_label: "PCs (one rank each)".into(),
-            y_label: y.into(),
-            y_log,
-            series: lines
-                .into_iter()
-                .map(|(label, mut points)| {
-                    points.sort_by(|a, b| a.0.total_cmp(&b.0));
-                    plot::Series {
-                        label,
-                        points,
-                        thin: false,
-                    }
-                })
-                .collect(),
-            ..Default::default()
-        };
+    let panel = |title: &str, y: &str, y_log: bool, lines: Lines| plot::Panel {
+        title: title.into(),
+        x_label: "PCs (one rank each)".into(),
+        y_label: y.into(),
+        y_log,
+        series: lines
+            .into_iter()
+            .map(|(label, mut points)| {
+                points.sort_by(|a, b| a.0.total_cmp(&b.0));
+                plot::Series {
+                    label,
+                    points,
+                    thin: false,
+                }
+            })
+            .collect(),
+        ..Default::default()
+    };
     let panels = [
         panel(
             "wall time per simulated second",
