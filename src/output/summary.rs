@@ -74,7 +74,7 @@ pub struct RankHost {
 }
 
 impl RankLine {
-    /// `account`'s line, on `hosts[account.rank]` (unknown if absent), over
+    /// `account`'s line, on `hosts[account.rank]` (an empty name if absent), over
     /// a run of `frames` frames.
     pub fn new(account: RankSummary, hosts: &[RankHost], frames: u64) -> RankLine {
         let at = hosts
@@ -102,5 +102,58 @@ impl std::ops::Deref for RankLine {
     type Target = RankSummary;
     fn deref(&self) -> &RankSummary {
         &self.account
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn per_rank_keeps_its_fields_at_the_top_level_and_adds_host_and_bytes_per_frame() {
+        let account = RankSummary {
+            rank: 1,
+            role: "worker".into(),
+            bytes_sent: 300,
+            bytes_received: 600,
+            ..Default::default()
+        };
+        let hosts = [
+            RankHost {
+                host: "pc1".into(),
+                link_bytes_per_s: None,
+            },
+            RankHost {
+                host: "pc2".into(),
+                link_bytes_per_s: Some(1.1e6),
+            },
+        ];
+        let json = serde_json::to_value(RankLine::new(account, &hosts, 3)).unwrap();
+        assert_eq!(json["rank"], 1);
+        assert_eq!(json["role"], "worker");
+        assert_eq!(json["bytes_sent"], 300);
+        assert_eq!(json["host"], "pc2");
+        assert_eq!(json["bytes_sent_per_frame"], 100.0);
+        assert_eq!(json["bytes_received_per_frame"], 200.0);
+        assert_eq!(json["link_bytes_per_s"], 1.1e6);
+        // Rank 0 has no link of its own to report, and an unknown rank no host.
+        let line = RankLine::new(RankSummary::default(), &hosts, 0);
+        let json = serde_json::to_value(&line).unwrap();
+        assert!(json.get("link_bytes_per_s").is_none());
+        assert_eq!(json["bytes_sent_per_frame"], 0.0);
+        let back: RankLine = serde_json::from_value(json).unwrap();
+        assert_eq!(back.host, "pc1");
+        assert_eq!(
+            RankLine::new(
+                RankSummary {
+                    rank: 7,
+                    ..Default::default()
+                },
+                &hosts,
+                1
+            )
+            .host,
+            ""
+        );
     }
 }
