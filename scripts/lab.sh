@@ -21,7 +21,8 @@
 #   --name PREFIX      namespaces PREFIX-sw, PREFIX-pc1 … (default rslab).
 #   --subnet A.B.C     the lab's /24 (default 10.250.0); it exists only inside the lab.
 #
-# Needs root (network namespaces), iproute2, openssh-server and Open MPI
+# Runs target/release/rigidsim (RIGIDSIM_BIN for another build). Needs root
+# (network namespaces), iproute2, openssh-server and Open MPI
 # (scripts/setup.sh installs them). Exit status: mpirun's.
 set -euo pipefail
 cd "$(dirname "$0")/.."

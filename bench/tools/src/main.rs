@@ -999,7 +999,9 @@ fn network(runs: &[Run], out: &Path) {
             _ => (0, 0),
         }
     };
-    let mut groups: BTreeMap<(u64, (u8, i64), String, u32), Vec<&Run>> = BTreeMap::new();
+    // (bodies, link order, link, PCs).
+    type Key = (u64, (u8, i64), String, u32);
+    let mut groups: BTreeMap<Key, Vec<&Run>> = BTreeMap::new();
     for r in &rs {
         groups
             .entry((r.bodies, order(&r.variant), r.variant.clone(), r.ranks))
