@@ -50,6 +50,7 @@ if why=$(bash scripts/lab.sh --check 2>&1); then
   same_as_one_rank() { # the 2-PC run's hash is det1's; ranks on pc1 and pc2; bytes crossed the link
     [ -s "$tmp/det1/summary.json" ] && [ -s "$tmp/lab2/summary.json" ] &&
       [ "$(hash_of "$tmp/lab2")" = "$(hash_of "$tmp/det1")" ] &&
+      grep -q "^rigidsim: ranks by host: pc1: 0; pc2: 1$" "$tmp/lab2.log" &&
       python3 - "$tmp/lab2/summary.json" <<'PY' || { cat "$tmp/lab2.log"; false; }
 import json, sys
 ranks = json.load(open(sys.argv[1]))["per_rank"]

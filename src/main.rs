@@ -224,6 +224,9 @@ fn run_scene(cli: RunArgs) -> ExitCode {
     // Which host each rank runs on (rank 0 only): for messages naming a
     // rank that stops answering, and for `summary.json`.
     let hosts = cluster::rank_hosts(&world);
+    if let Some(line) = cluster::hosts_line(&hosts) {
+        say(&line);
+    }
 
     if rank != 0 {
         if Some(rank) == roles.renderer {

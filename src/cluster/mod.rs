@@ -1199,6 +1199,29 @@ pub fn rank_hosts(world: &SimpleCommunicator) -> Vec<String> {
         .collect()
 }
 
+/// Which ranks run on which host, in one line, when they run on more than
+/// one: rank 0 prints it at start-up, so that a job mpirun ends for a lost
+/// host (its message names the host, not the ranks) says whose ranks they were.
+pub fn hosts_line(hosts: &[String]) -> Option<String> {
+    let mut by_host: Vec<(&str, Vec<usize>)> = Vec::new();
+    for (rank, host) in hosts.iter().enumerate() {
+        match by_host.iter_mut().find(|(h, _)| h == host) {
+            Some((_, ranks)) => ranks.push(rank),
+            None => by_host.push((host, vec![rank])),
+        }
+    }
+    (by_host.len() > 1).then(|| {
+        let parts: Vec<String> = by_host
+            .iter()
+            .map(|(h, ranks)| {
+                let r: Vec<String> = ranks.iter().map(|r| r.to_string()).collect();
+                format!("{h}: {}", r.join(", "))
+            })
+            .collect();
+        format!("ranks by host: {}", parts.join("; "))
+    })
+}
+
 /// This machine's host name (its UTS name: a lab's "PC" has its own).
 pub fn hostname() -> String {
     let mut buf = [0u8; 256];
