@@ -128,7 +128,9 @@ cleanup() {
   for p in $fault_pid $mpirun_pid "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
   for n in "${made_ns[@]}"; do ip netns del "$n" 2>/dev/null || true; done
   [ -z "$dir" ] || rm -rf "$dir"
-  [ "$made_run_sshd" -eq 0 ] || rmdir /run/sshd 2>/dev/null || true
+  # sshd's privilege-separation folder, if this lab made it and no other
+  # sshd (another lab's) still needs it.
+  if [ "$made_run_sshd" -eq 1 ] && ! pgrep -x sshd >/dev/null; then rmdir /run/sshd 2>/dev/null || true; fi
   [ "$made_run_netns" -eq 0 ] || rmdir /run/netns 2>/dev/null || true
 }
 trap cleanup EXIT
