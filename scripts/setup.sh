@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Installs what rigidsim needs on Debian (once): Open MPI, libclang for rsmpi's
 # bindings, Mesa's CPU Vulkan driver for off-screen rendering, ffmpeg for
-# video, fontconfig and a font for benchmark plots, and for the browser test of
+# video, fontconfig and a font for benchmark plots, for the browser test of
 # `rigidsim view`'s replay page: Chromium, Node.js and npm, then the viewer's
-# npm packages (viewer/node_modules, from viewer/package-lock.json). Safe to
-# run again: installs only what is missing.
+# npm packages (viewer/node_modules, from viewer/package-lock.json), and
+# iproute2 and openssh-server for the lab in a box. Safe to run again:
+# installs only what is missing.
 set -euo pipefail
 
 need=()
@@ -21,13 +22,32 @@ dpkg -s fonts-dejavu-core >/dev/null 2>&1 || need+=(fonts-dejavu-core)
 command -v chromium >/dev/null 2>&1 || need+=(chromium)
 command -v node >/dev/null 2>&1 || need+=(nodejs)
 command -v npm >/dev/null 2>&1 || need+=(npm)
+# The lab in a box (scripts/lab.sh): namespaces and links (iproute2, with tc),
+# unshare (util-linux), an sshd per "PC" and the ssh client mpirun launches with.
+command -v ip >/dev/null 2>&1 && command -v tc >/dev/null 2>&1 || need+=(iproute2)
+command -v unshare >/dev/null 2>&1 || need+=(util-linux)
+[ -x /usr/sbin/sshd ] || need+=(openssh-server)
+command -v ssh >/dev/null 2>&1 || need+=(openssh-client)
 
 if [ ${#need[@]} -gt 0 ]; then
   echo "setup: installing ${need[*]}" >&2
   sudo=""
   [ "$(id -u)" -eq 0 ] || sudo="sudo"
   $sudo apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
+  # openssh-server's package would start a system sshd listening on every
+  # address; the lab starts its own, on lab addresses only. Debian's
+  # policy-rc.d answer 101 stops the package's service from starting (where
+  # no policy is set already).
+  policy=""
+  if [[ " ${need[*]} " == *" openssh-server "* ]] && [ ! -e /usr/sbin/policy-rc.d ]; then
+    policy=/usr/sbin/policy-rc.d
+    printf '#!/bin/sh\nexit 101\n' | $sudo tee "$policy" >/dev/null
+    $sudo chmod 755 "$policy"
+  fi
+  rc=0
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null || rc=$?
+  [ -z "$policy" ] || $sudo rm -f "$policy"
+  [ "$rc" -eq 0 ] || exit "$rc"
 fi
 
 # The viewer's packages: playwright-core drives Chromium in the browser test;

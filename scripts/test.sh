@@ -46,6 +46,49 @@ check "replay page in headless chromium" bash -c "$bin scenes/render_check.toml 
   $bin view scenes/render_check.toml $tmp/replay >/dev/null && \
   node viewer/test/replay_in_chromium.mjs --page $tmp/replay/replay.html --run $tmp/replay --body 1"
 
+# A lab in a box (scripts/lab.sh): 2 "PCs", mpirun over ssh and TCP only,
+# every stage distributed: the same state hash as one rank, and each rank
+# reports its own host. Then a PC's processes killed, and a PC's cable
+# pulled, mid-run: the job ends within 15 s naming the PC and its rank, the
+# trajectory written so far is kept, and the lab leaves nothing behind.
+if why=$(bash scripts/lab.sh --check 2>&1); then
+  lab() { bash scripts/lab.sh --name rsci "$@"; }
+  sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
+      -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml >"$tmp/crowd200.toml"
+  lab --hosts 2 --link 100mbit scenes/nuts_and_bolts.toml --force-distribute --no-render --no-progress \
+    --duration 1.0 --out "$tmp/lab2" >"$tmp/lab2.log" 2>&1 || true
+  same_as_one_rank() { # the 2-PC run's hash is det1's; ranks on pc1 and pc2; bytes crossed the link
+    [ -s "$tmp/det1/summary.json" ] && [ -s "$tmp/lab2/summary.json" ] &&
+      [ "$(hash_of "$tmp/lab2")" = "$(hash_of "$tmp/det1")" ] &&
+      grep -q "^rigidsim: ranks by host: pc1: 0; pc2: 1$" "$tmp/lab2.log" &&
+      python3 - "$tmp/lab2/summary.json" <<'PY' || { cat "$tmp/lab2.log"; false; }
+import json, sys
+ranks = json.load(open(sys.argv[1]))["per_rank"]
+assert [r["host"] for r in ranks] == ["pc1", "pc2"], ranks
+assert ranks[1]["bytes_received_per_frame"] > 0, ranks
+# 100 Mbit/s is 12.5 MB/s (TCP and busy cores take some of it); shared memory is > 100 MB/s.
+assert 1e6 < ranks[1]["link_bytes_per_s"] < 5e7, ranks
+PY
+  }
+  check "lab: 2 PCs over ssh and TCP, state_hash as on 1 rank" same_as_one_rank
+  ended_in_time() { # log, PC, rank: the job failed within 15 s of the fault, naming both
+    grep -q "pc$2 (10.250.0.$2) ran rank(s) $3" "$1" &&
+      awk '/the job ended .* after the fault/ { s = $5 } END { exit !(s != "" && s < 15) }' "$1" &&
+      grep -q "exit status [1-9]" "$1" && [ -s "$(dirname "$1")/fault/trajectory.csv" ] &&
+      ! ip netns list | grep -q '^rsci-' || { cat "$1"; false; }
+  }
+  mkdir -p "$tmp/kill" "$tmp/down"
+  lab --hosts 2 --fault kill:2@3 "$tmp/crowd200.toml" --no-render --no-progress --duration 60 \
+    --out "$tmp/kill/fault" >"$tmp/kill/log" 2>&1 || true
+  check "lab: a PC's processes killed mid-run end the job within 15 s, naming it" ended_in_time "$tmp/kill/log" 2 1
+  lab --hosts 3 --fault down:3@3 "$tmp/crowd200.toml" --no-render --no-progress --duration 60 \
+    --out "$tmp/down/fault" >"$tmp/down/log" 2>&1 || true
+  check "lab: a PC's cable pulled mid-run ends the job within 15 s, naming it" ended_in_time "$tmp/down/log" 3 2
+  check "bench_network --tiny" bash scripts/bench_network.sh --tiny
+else
+  echo "skipped: lab tests (2 PCs over ssh and TCP, faults across hosts, bench_network --tiny): $why"
+fi
+
 # Every benchmark once on a tiny setting, so none can rot (timings are not checked).
 check "bench_accuracy --tiny" bash scripts/bench_accuracy.sh --tiny
 check "bench_scaling --tiny" bash scripts/bench_scaling.sh --tiny

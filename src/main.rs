@@ -18,6 +18,7 @@ use mpi::topology::Communicator;
 use mpi::traits::Root;
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
 use rigidsim::output::checkpoint::Checkpoint;
+use rigidsim::output::summary::RankHost;
 use rigidsim::output::trajectory;
 use rigidsim::run::{self, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunError, RunOptions};
 use rigidsim::step::{Executor, Inline};
@@ -258,6 +259,12 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         }
     }
     let roles = Roles::new(size, scene.settings.render.is_some());
+    // Which host each rank runs on (rank 0 only): for messages naming a
+    // rank that stops answering, and for `summary.json`.
+    let hosts = cluster::rank_hosts(&world);
+    if let Some(line) = cluster::hosts_line(&hosts) {
+        say(&line);
+    }
 
     if rank != 0 {
         if Some(rank) == roles.renderer {
@@ -270,11 +277,14 @@ fn run_scene(cli: RunArgs) -> ExitCode {
 
     let mut inline = Inline::default();
     let mut mpi_exec;
+    let mut link_rates = Vec::new();
     let exec: &mut dyn Executor = if roles.workers.is_empty() {
         &mut inline
     } else {
         mpi_exec = MpiExecutor::new(&world, roles.clone(), &scene.objects);
         mpi_exec.force_distribute = cli.force_distribute;
+        mpi_exec.set_hosts(hosts.clone());
+        link_rates = mpi_exec.link_rates();
         &mut mpi_exec
     };
     let mut no_frames = NoFrames;
@@ -303,7 +313,15 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             }
         }
     };
-    match run::run_coordinator(scene, &opts, &out_dir, exec, frames, resume) {
+    let hosts: Vec<RankHost> = hosts
+        .into_iter()
+        .enumerate()
+        .map(|(r, host)| RankHost {
+            host,
+            link_bytes_per_s: link_rates.get(r).copied().flatten(),
+        })
+        .collect();
+    match run::run_coordinator(scene, &opts, &out_dir, exec, frames, resume, &hosts) {
         Ok(summary) => {
             eprintln!(
                 "rigidsim: {} bodies, {:.3} s simulated in {:.3} s ({:.2}x real time), ended by {}; results in {}",

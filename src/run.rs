@@ -5,7 +5,7 @@
 use crate::body::{Activity, BodyKind};
 use crate::output::checkpoint::{self, Checkpoint, RunMarks};
 use crate::output::progress::Progress;
-use crate::output::summary::{self, RankSummary, Summary};
+use crate::output::summary::{self, RankHost, RankLine, RankSummary, Summary};
 use crate::output::trajectory::{Continued, TrajectoryWriter};
 use crate::output::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::render;
@@ -444,7 +444,8 @@ pub enum RunError {
 /// Runs the frame loop on the coordinator and writes every output. With
 /// `resume`, the run continues from that checkpoint (already checked against
 /// the scene by `Checkpoint::read_for`) and the trajectory in `out_dir`, if
-/// any, is continued from the checkpoint's time.
+/// any, is continued from the checkpoint's time. `hosts` names each rank's
+/// host (by rank) for `summary.json`'s `per_rank`.
 pub fn run_coordinator(
     scene: Scene,
     opts: &RunOptions,
@@ -452,6 +453,7 @@ pub fn run_coordinator(
     exec: &mut dyn Executor,
     frames: &mut dyn FrameSink,
     resume: Option<Checkpoint>,
+    hosts: &[RankHost],
 ) -> Result<Summary, RunError> {
     let io = |e: std::io::Error, what: &str| RunError::Io(format!("{what}: {e}"));
     std::fs::create_dir_all(out_dir)
@@ -675,7 +677,10 @@ pub fn run_coordinator(
         energy_initial_j: energy_initial,
         energy_final_j: world.energy(),
         stage_seconds: world.stage.clone(),
-        per_rank,
+        per_rank: per_rank
+            .into_iter()
+            .map(|r| RankLine::new(r, hosts, world.steps.div_ceil(frame_stride)))
+            .collect(),
         state_hash: world.state_hash(),
         counters: world.counters.clone(),
         bodies_resting: world

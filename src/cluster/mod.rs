@@ -272,6 +272,7 @@ pub struct MpiExecutor<'w> {
     parts: Vec<usize>,
     /// Distribute regardless of cost (tests of determinism and balance).
     pub force_distribute: bool,
+    net: Network,
 }
 
 impl<'w> MpiExecutor<'w> {
@@ -289,9 +290,11 @@ impl<'w> MpiExecutor<'w> {
             polygons: objects.iter().map(|o| o.polygon_count).collect(),
             parts: objects.iter().map(|o| o.parts.len()).collect(),
             force_distribute: false,
+            net: Network::default(),
             roles,
         };
         exec.measure_latency();
+        exec.measure_link_rates();
         exec
     }
 
@@ -348,8 +351,9 @@ impl<'w> MpiExecutor<'w> {
     /// Ends the whole job: `rank` stopped answering.
     fn lost(&self, rank: i32) -> ! {
         eprintln!(
-            "rigidsim: rank 0: rank {rank} ({}) has not answered for {} s; ending the run",
+            "rigidsim: rank 0: rank {rank} ({}, on host {}) has not answered for {} s; ending the run",
             self.roles.role_of(rank),
+            self.host_of(rank),
             REPLY_DEADLINE.as_secs()
         );
         self.world.abort(5)
@@ -389,11 +393,12 @@ impl<'w> MpiExecutor<'w> {
         }
     }
 
-    /// Workers a stage of this estimated cost should use (0: rank 0 alone),
-    /// from the measured round trip and the estimated speeds; see
-    /// `schedule::workers_to_use`. `--force-distribute` uses them all.
+    /// Workers the pair tasks of this estimated cost should use (0: rank 0
+    /// alone), from the measured round trip, the link's rate and the
+    /// estimated speeds; see `schedule::workers_to_use_over_link`.
+    /// `--force-distribute` uses them all.
     fn workers_for(&self, estimated_s: f64, tasks: usize) -> usize {
-        self.workers_for_share(estimated_s, tasks, COORDINATOR_SHARE)
+        self.workers_for_stage(Stage::Narrowphase, estimated_s, tasks, COORDINATOR_SHARE)
     }
 
     fn workers_for_share(&self, estimated_s: f64, tasks: usize, share: f64) -> usize {
@@ -741,14 +746,18 @@ impl Executor for MpiExecutor<'_> {
 
     fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
         self.clock.enter();
+        let mark = self.traffic_mark(Stage::Narrowphase);
         let r = self.narrowphase_stage(objects, tasks);
+        self.learn_traffic(Stage::Narrowphase, mark);
         self.dist.distributable_s += self.clock.leave();
         r
     }
 
     fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
         self.clock.enter();
+        let mark = self.traffic_mark(Stage::SolveIslands);
         let r = self.solve_islands_stage(tasks);
+        self.learn_traffic(Stage::SolveIslands, mark);
         self.dist.distributable_s += self.clock.leave();
         r
     }
@@ -760,7 +769,9 @@ impl Executor for MpiExecutor<'_> {
         inputs: Vec<GroupInput>,
     ) -> Vec<GroupReply> {
         self.clock.enter();
+        let mark = self.traffic_mark(Stage::StepGroups);
         let r = self.step_groups_stage(st, params, inputs);
+        self.learn_traffic(Stage::StepGroups, mark);
         self.dist.distributable_s += self.clock.leave();
         r
     }
@@ -838,7 +849,12 @@ impl MpiExecutor<'_> {
         let costs: Vec<f64> = units.iter().map(|u| u * self.model.island_coef).collect();
         let total: f64 = costs.iter().sum();
         // Self-scheduled: rank 0 works at its full speed (as for groups).
-        let workers = self.workers_for_share(total, tasks.len(), SELF_SCHEDULED_SHARE);
+        let workers = self.workers_for_stage(
+            Stage::SolveIslands,
+            total,
+            tasks.len(),
+            SELF_SCHEDULED_SHARE,
+        );
         if workers == 0 {
             self.dist.solve_local += 1;
             let clock = Instant::now();
@@ -875,7 +891,8 @@ impl MpiExecutor<'_> {
         // Seconds, from what the same bodies' groups took last step.
         let costs: Vec<f64> = inputs.iter().map(GroupInput::predicted_s).collect();
         let total: f64 = costs.iter().sum();
-        let workers = self.workers_for_share(total, inputs.len(), SELF_SCHEDULED_SHARE);
+        let workers =
+            self.workers_for_stage(Stage::StepGroups, total, inputs.len(), SELF_SCHEDULED_SHARE);
         if workers == 0 {
             // On rank 0, whose executor (this one) still scatters the
             // groups' own narrowphase batches and island solves where they
@@ -994,6 +1011,240 @@ const FIRST_STAGE_SHARE: f64 = 0.45;
 /// per rank (below, messages cost more than the share saves).
 const MIN_PREPARED_PAIRS: usize = 16;
 
+/// The stages whose messages are costed by their bytes (`schedule::Link`).
+#[derive(Clone, Copy, Debug)]
+enum Stage {
+    Narrowphase,
+    SolveIslands,
+    /// Group steps, with the `PreparePairs` shares sent before them.
+    StepGroups,
+}
+
+/// Payload of one link-rate probe: large enough that its time on a
+/// 100 Mbit/s link (5 ms each way) stands well above a round trip's, small
+/// enough that three per worker over 10 Mbit/s take a third of a second.
+const PROBE_BYTES: usize = 64 * 1024;
+/// Probes of each size per worker (the fastest is kept).
+const PROBES: usize = 3;
+
+/// What the network costs, for the byte term of the cost model and for
+/// naming hosts: each rank's host, each worker's link rate measured at
+/// start-up, and per stage the bytes its messages carried per second of
+/// work handed to workers.
+#[derive(Default)]
+struct Network {
+    /// By rank; empty until `set_hosts`.
+    hosts: Vec<String>,
+    /// By slot (slot 0, rank 0 itself, unused); infinite where the probe
+    /// took no longer than an empty round trip (shared memory).
+    link_bytes_per_s: Vec<f64>,
+    /// By `Stage`; 0 until the stage was distributed once.
+    bytes_per_cost_s: [f64; 3],
+}
+
+/// Where a stage's traffic stood when it began (`MpiExecutor::traffic_mark`).
+#[derive(Clone, Copy)]
+struct TrafficMark {
+    bytes: u64,
+    worker_cost_s: f64,
+    distributed: u64,
+}
+
+impl MpiExecutor<'_> {
+    /// Each rank's host (`rank_hosts`), for messages and `summary.json`.
+    pub fn set_hosts(&mut self, hosts: Vec<String>) {
+        self.net.hosts = hosts;
+    }
+
+    fn host_of(&self, rank: i32) -> &str {
+        self.net
+            .hosts
+            .get(rank as usize)
+            .map_or("unknown", String::as_str)
+    }
+
+    /// The link rate measured to each rank (bytes per second; `None` for
+    /// rank 0 and for ranks not measured or reached through shared memory),
+    /// by rank.
+    pub fn link_rates(&self) -> Vec<Option<f64>> {
+        let mut rates = vec![None; self.roles.size as usize];
+        for (k, &w) in self.roles.workers.iter().enumerate() {
+            rates[w as usize] = self
+                .net
+                .link_bytes_per_s
+                .get(k + 1)
+                .copied()
+                .filter(|r| r.is_finite());
+        }
+        rates
+    }
+
+    /// Each worker's link rate: twice `PROBE_BYTES` over the time an echo
+    /// of them takes beyond an empty echo, each the fastest of `PROBES`
+    /// (interleaved). The fastest, not the median: on shared cores a
+    /// sample's extra time is mostly the worker waiting for a core, which
+    /// says nothing of the link. Their bytes are not booked (they are not
+    /// the run's traffic).
+    fn measure_link_rates(&mut self) {
+        let booked = self.book.clone();
+        let mut rates = vec![f64::INFINITY; self.roles.workers.len() + 1];
+        for (k, &w) in self.roles.workers.clone().iter().enumerate() {
+            let (mut empty, mut full) = (f64::INFINITY, f64::INFINITY);
+            for _ in 0..PROBES {
+                for (bytes, best) in [(0, &mut empty), (PROBE_BYTES, &mut full)] {
+                    let t = Instant::now();
+                    self.send(
+                        w,
+                        &Req::Probe {
+                            payload: vec![0u8; bytes],
+                        },
+                    );
+                    let _ = self.receive(w);
+                    *best = best.min(t.elapsed().as_secs_f64());
+                }
+            }
+            if full > empty {
+                rates[k + 1] = 2.0 * PROBE_BYTES as f64 / (full - empty);
+            }
+        }
+        for (b, old) in self.book.iter_mut().zip(booked) {
+            b.bytes_sent = old.bytes_sent;
+            b.bytes_received = old.bytes_received;
+        }
+        self.net.link_bytes_per_s = rates;
+    }
+
+    /// Rank 0's link: the slowest measured path to a worker (every message
+    /// passes through rank 0's link, so its rate bounds them all).
+    fn link(&self, stage: Stage) -> schedule::Link {
+        let bytes_per_s = self.net.link_bytes_per_s[1..]
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        schedule::Link {
+            bytes_per_cost_s: self.net.bytes_per_cost_s[stage as usize],
+            bytes_per_s,
+        }
+    }
+
+    /// `workers_for_share`, with the time the stage's bytes take on the
+    /// link (`schedule::workers_to_use_over_link`).
+    fn workers_for_stage(&self, stage: Stage, estimated_s: f64, tasks: usize, share: f64) -> usize {
+        let workers = self.workers_for_share(estimated_s, tasks, share);
+        if workers == 0 || self.force_distribute {
+            return workers;
+        }
+        schedule::workers_to_use_over_link(
+            estimated_s,
+            &self.speeds,
+            share,
+            self.latency_s,
+            &self.link(stage),
+        )
+    }
+
+    fn distributed_count(&self, stage: Stage) -> u64 {
+        match stage {
+            Stage::Narrowphase => self.dist.narrowphase_distributed,
+            Stage::SolveIslands => self.dist.solve_distributed,
+            Stage::StepGroups => self.dist.groups_distributed,
+        }
+    }
+
+    fn traffic_mark(&self, stage: Stage) -> TrafficMark {
+        TrafficMark {
+            bytes: self
+                .book
+                .iter()
+                .map(|b| b.bytes_sent + b.bytes_received)
+                .sum(),
+            worker_cost_s: self.book[1..].iter().map(|b| b.cost_s).sum(),
+            distributed: self.distributed_count(stage),
+        }
+    }
+
+    /// After a stage that went to workers: the bytes it moved per second of
+    /// the work it handed them, smoothed over the last few such stages.
+    fn learn_traffic(&mut self, stage: Stage, mark: TrafficMark) {
+        if self.distributed_count(stage) == mark.distributed {
+            return;
+        }
+        let now = self.traffic_mark(stage);
+        let cost = now.worker_cost_s - mark.worker_cost_s;
+        let bytes = (now.bytes - mark.bytes) as f64;
+        if cost <= 0.0 || bytes <= 0.0 {
+            return;
+        }
+        let old = &mut self.net.bytes_per_cost_s[stage as usize];
+        let measured = bytes / cost;
+        *old = if *old > 0.0 {
+            0.8 * *old + 0.2 * measured
+        } else {
+            measured
+        };
+    }
+}
+
+/// Each rank's host name, gathered on rank 0 (by rank; empty elsewhere).
+/// Every rank calls it once at start-up, before the roles part.
+pub fn rank_hosts(world: &SimpleCommunicator) -> Vec<String> {
+    use mpi::collective::Root;
+    const LEN: usize = 64;
+    let mut name = [0u8; LEN];
+    let own = hostname();
+    let n = own.len().min(LEN);
+    name[..n].copy_from_slice(&own.as_bytes()[..n]);
+    let root = world.process_at_rank(0);
+    if world.rank() != 0 {
+        root.gather_into(&name[..]);
+        return Vec::new();
+    }
+    let mut all = vec![0u8; LEN * world.size() as usize];
+    root.gather_into_root(&name[..], &mut all[..]);
+    all.chunks(LEN)
+        .map(|c| {
+            let end = c.iter().position(|&b| b == 0).unwrap_or(LEN);
+            String::from_utf8_lossy(&c[..end]).into_owned()
+        })
+        .collect()
+}
+
+/// Which ranks run on which host, in one line, when they run on more than
+/// one: rank 0 prints it at start-up, so that a job mpirun ends for a lost
+/// host (its message names the host, not the ranks) says whose ranks they were.
+pub fn hosts_line(hosts: &[String]) -> Option<String> {
+    let mut by_host: Vec<(&str, Vec<usize>)> = Vec::new();
+    for (rank, host) in hosts.iter().enumerate() {
+        match by_host.iter_mut().find(|(h, _)| h == host) {
+            Some((_, ranks)) => ranks.push(rank),
+            None => by_host.push((host, vec![rank])),
+        }
+    }
+    (by_host.len() > 1).then(|| {
+        let parts: Vec<String> = by_host
+            .iter()
+            .map(|(h, ranks)| {
+                let r: Vec<String> = ranks.iter().map(|r| r.to_string()).collect();
+                format!("{h}: {}", r.join(", "))
+            })
+            .collect();
+        format!("ranks by host: {}", parts.join("; "))
+    })
+}
+
+/// This machine's host name (its UTS name: a lab's "PC" has its own).
+pub fn hostname() -> String {
+    let mut buf = [0u8; 256];
+    // SAFETY: `buf` is writable for its length; gethostname NUL-terminates
+    // names shorter than it.
+    let rc = unsafe { libc::gethostname(buf.as_mut_ptr().cast(), buf.len()) };
+    if rc != 0 {
+        return "unknown".into();
+    }
+    let end = buf.iter().position(|&b| b == 0).unwrap_or(buf.len());
+    String::from_utf8_lossy(&buf[..end]).into_owned()
+}
+
 /// A worker rank: answers requests from rank 0 until `Stop`.
 pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
     let root = world.process_at_rank(0);
@@ -1018,6 +1269,11 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
         };
         let reply = match req {
             Req::Ping => Reply::Pong,
+            Req::Probe { payload } => {
+                // Not the run's traffic (see `Req::Probe`).
+                report.bytes_received -= bytes.len() as u64;
+                Reply::Probe { payload }
+            }
             Req::Stop => Reply::Report(report.clone()),
             Req::Narrowphase { tasks } => {
                 report.narrowphase_tasks += tasks.len() as u64;
@@ -1078,7 +1334,9 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
         };
         let stop = matches!(reply, Reply::Report(_));
         let out = encode(&reply);
-        report.bytes_sent += out.len() as u64;
+        if !matches!(reply, Reply::Probe { .. }) {
+            report.bytes_sent += out.len() as u64;
+        }
         root.send_with_tag(&out[..], protocol::TAG_REPLY);
         if stop {
             return;

@@ -48,6 +48,10 @@ pub enum Request {
     },
     /// Start-up latency probe: the worker answers `Pong` at once.
     Ping,
+    /// Start-up link-rate probe (`MpiExecutor::measure_link_rates`): the
+    /// worker echoes the payload at once, so one round trip carries it each
+    /// way. Neither side books its bytes: they are not the run's traffic.
+    Probe { payload: Vec<u8> },
     /// End of run: the worker answers `Report` and exits.
     Stop,
 }
@@ -75,6 +79,10 @@ pub enum Reply {
         busy_s: f64,
     },
     Pong,
+    /// The `Probe` request's payload, back.
+    Probe {
+        payload: Vec<u8>,
+    },
     Report(WorkerReport),
 }
 

@@ -143,22 +143,80 @@ pub const DISTRIBUTE_MARGIN: f64 = 0.1;
 /// (1 + k/2) round trips of `round_trip_s`. More workers divide the work
 /// further but add messages, so beyond some k they cost more than they
 /// save; the thesis's finding that one PC is faster below 15–20 bodies is
-/// the k = 0 end of this. Ties go to fewer workers.
+/// the k = 0 end of this. Ties go to fewer workers. Messages cost no time
+/// for their size here; `workers_to_use_over_link` adds that.
 pub fn workers_to_use(
     estimated_s: f64,
     speeds: &[f64],
     coordinator_share: f64,
     round_trip_s: f64,
 ) -> usize {
+    workers_to_use_over_link(
+        estimated_s,
+        speeds,
+        coordinator_share,
+        round_trip_s,
+        &Link::FREE,
+    )
+}
+
+/// What the bytes of a stage's messages cost (SPEC 4: the thesis ran the
+/// same scenes over 100BASE-T and 10BASE-T).
+#[derive(Clone, Copy, Debug)]
+pub struct Link {
+    /// Bytes the stage's messages carried (requests and replies together)
+    /// per second of estimated work handed to workers, as measured the last
+    /// times the stage was distributed; 0 before it ever was.
+    pub bytes_per_cost_s: f64,
+    /// Rate of rank 0's link, bytes per second (measured at start-up).
+    pub bytes_per_s: f64,
+}
+
+impl Link {
+    pub const FREE: Link = Link {
+        bytes_per_cost_s: 0.0,
+        bytes_per_s: f64::INFINITY,
+    };
+
+    /// Seconds rank 0's link needs for the messages of a stage that hands
+    /// `worker_cost_s` of work to workers. Every request and every reply
+    /// passes through rank 0's one link, one after another, so they add
+    /// (on a switched full-duplex link requests and replies could overlap;
+    /// on the thesis's shared hubs they could not, and this counts them so).
+    pub fn transfer_s(&self, worker_cost_s: f64) -> f64 {
+        if self.bytes_per_s.is_finite() && self.bytes_per_s > 0.0 {
+            self.bytes_per_cost_s * worker_cost_s / self.bytes_per_s
+        } else {
+            0.0
+        }
+    }
+}
+
+/// `workers_to_use`, with the time the stage's bytes take on rank 0's link:
+/// with k workers, the part of the work they take (their share of the
+/// combined speed) travels, at `link.bytes_per_cost_s` bytes per second of
+/// work, through a link of `link.bytes_per_s`. Over 10 Mbit/s the bytes of
+/// a small stage outweigh what its workers save, and it stays on rank 0.
+pub fn workers_to_use_over_link(
+    estimated_s: f64,
+    speeds: &[f64],
+    coordinator_share: f64,
+    round_trip_s: f64,
+    link: &Link,
+) -> usize {
     let alone = estimated_s / speeds[0].max(1e-9);
     let mut workers: Vec<f64> = speeds[1..].to_vec();
     workers.sort_by(|a, b| b.total_cmp(a));
-    let mut combined = speeds[0] * coordinator_share;
+    let own = speeds[0] * coordinator_share;
+    let mut combined = own;
     let (mut best, mut best_time) = (0, alone * (1.0 - DISTRIBUTE_MARGIN));
     for (k, s) in workers.iter().enumerate() {
         combined += s.max(0.0);
         let k = k + 1;
-        let time = estimated_s / combined.max(1e-9) + round_trip_s * (1.0 + 0.5 * k as f64);
+        let to_workers = estimated_s * (1.0 - own / combined.max(1e-9));
+        let time = estimated_s / combined.max(1e-9)
+            + round_trip_s * (1.0 + 0.5 * k as f64)
+            + link.transfer_s(to_workers);
         if time < best_time {
             best = k;
             best_time = time;
@@ -221,6 +279,41 @@ mod tests {
         assert_eq!(
             fastest_slots(&[1.0, 2.0, 2.0, 2.0], 2),
             vec![true, true, true, false]
+        );
+    }
+
+    #[test]
+    fn a_slow_link_keeps_a_stage_on_rank_0_that_a_fast_one_distributes() {
+        let speeds = [1.0, 1.0, 1.0, 1.0];
+        // 2 ms of work, 0.2 ms round trips; its messages carry 10⁸ bytes per
+        // second of work (200 kB for the whole stage, about 170 kB of it to
+        // the workers with all three).
+        let bytes = 1e8;
+        let link = |bytes_per_s| Link {
+            bytes_per_cost_s: bytes,
+            bytes_per_s,
+        };
+        let fast = link(12.5e6 * 1000.0);
+        assert_eq!(workers_to_use_over_link(2e-3, &speeds, 0.5, 2e-4, &fast), 3);
+        // 100 Mbit/s (12.5 MB/s): 170 kB take 14 ms, more than the stage
+        // alone: rank 0 keeps it. So does 10 Mbit/s.
+        let slow = link(12.5e6);
+        assert_eq!(workers_to_use_over_link(2e-3, &speeds, 0.5, 2e-4, &slow), 0);
+        assert_eq!(
+            workers_to_use_over_link(2e-3, &speeds, 0.5, 2e-4, &link(1.25e6)),
+            0
+        );
+        // A stage 100× larger per byte (1 s of work, the same bytes)
+        // still pays at 10 Mbit/s.
+        let lean = Link {
+            bytes_per_cost_s: 2e5,
+            bytes_per_s: 1.25e6,
+        };
+        assert_eq!(workers_to_use_over_link(1.0, &speeds, 0.5, 2e-4, &lean), 3);
+        // Unmeasured bytes cost nothing: the plain rule.
+        assert_eq!(
+            workers_to_use_over_link(2e-3, &speeds, 0.5, 2e-4, &Link::FREE),
+            workers_to_use(2e-3, &speeds, 0.5, 2e-4)
         );
     }
 

@@ -36,7 +36,7 @@ pub struct Summary {
     pub energy_initial_j: f64,
     pub energy_final_j: f64,
     pub stage_seconds: StageSeconds,
-    pub per_rank: Vec<RankSummary>,
+    pub per_rank: Vec<RankLine>,
     pub state_hash: String,
     pub counters: Counters,
     pub bodies_resting: usize,
@@ -76,5 +76,119 @@ pub fn scene_file_identity(path: &Path) -> (Option<String>, Option<String>) {
             )
         }
         Err(_) => (None, None),
+    }
+}
+
+/// One entry of `per_rank`: the rank's own account (its fields at the top
+/// level, as before) and where it ran: its host and what it sent and
+/// received per frame (`frame_interval_s` of simulated time, the frames
+/// `worst_frame_s` times; a last, partial frame counts as one).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct RankLine {
+    #[serde(flatten)]
+    pub account: RankSummary,
+    /// The rank's host name (on a lab from `scripts/lab.sh`, its "PC").
+    #[serde(default)]
+    pub host: String,
+    #[serde(default)]
+    pub bytes_sent_per_frame: f64,
+    #[serde(default)]
+    pub bytes_received_per_frame: f64,
+    /// Rate of the link between rank 0 and this rank, bytes per second,
+    /// measured at start-up; absent for rank 0, the renderer, and ranks
+    /// reached through shared memory (no slower than an empty message).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_bytes_per_s: Option<f64>,
+}
+
+/// Where a rank ran, as rank 0 learnt at start-up.
+#[derive(Clone, Debug, Default)]
+pub struct RankHost {
+    pub host: String,
+    pub link_bytes_per_s: Option<f64>,
+}
+
+impl RankLine {
+    /// `account`'s line, on `hosts[account.rank]` (an empty name if absent), over
+    /// a run of `frames` frames.
+    pub fn new(account: RankSummary, hosts: &[RankHost], frames: u64) -> RankLine {
+        let at = hosts
+            .get(account.rank as usize)
+            .cloned()
+            .unwrap_or_default();
+        let per_frame = |bytes: u64| {
+            if frames > 0 {
+                bytes as f64 / frames as f64
+            } else {
+                0.0
+            }
+        };
+        RankLine {
+            host: at.host,
+            bytes_sent_per_frame: per_frame(account.bytes_sent),
+            bytes_received_per_frame: per_frame(account.bytes_received),
+            link_bytes_per_s: at.link_bytes_per_s,
+            account,
+        }
+    }
+}
+
+impl std::ops::Deref for RankLine {
+    type Target = RankSummary;
+    fn deref(&self) -> &RankSummary {
+        &self.account
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn per_rank_keeps_its_fields_at_the_top_level_and_adds_host_and_bytes_per_frame() {
+        let account = RankSummary {
+            rank: 1,
+            role: "worker".into(),
+            bytes_sent: 300,
+            bytes_received: 600,
+            ..Default::default()
+        };
+        let hosts = [
+            RankHost {
+                host: "pc1".into(),
+                link_bytes_per_s: None,
+            },
+            RankHost {
+                host: "pc2".into(),
+                link_bytes_per_s: Some(1.1e6),
+            },
+        ];
+        let json = serde_json::to_value(RankLine::new(account, &hosts, 3)).unwrap();
+        assert_eq!(json["rank"], 1);
+        assert_eq!(json["role"], "worker");
+        assert_eq!(json["bytes_sent"], 300);
+        assert_eq!(json["host"], "pc2");
+        assert_eq!(json["bytes_sent_per_frame"], 100.0);
+        assert_eq!(json["bytes_received_per_frame"], 200.0);
+        assert_eq!(json["link_bytes_per_s"], 1.1e6);
+        // Rank 0 has no link of its own to report, and an unknown rank no host.
+        let line = RankLine::new(RankSummary::default(), &hosts, 0);
+        let json = serde_json::to_value(&line).unwrap();
+        assert!(json.get("link_bytes_per_s").is_none());
+        assert_eq!(json["bytes_sent_per_frame"], 0.0);
+        let back: RankLine = serde_json::from_value(json).unwrap();
+        assert_eq!(back.host, "pc1");
+        assert_eq!(
+            RankLine::new(
+                RankSummary {
+                    rank: 7,
+                    ..Default::default()
+                },
+                &hosts,
+                1
+            )
+            .host,
+            ""
+        );
     }
 }

@@ -6,7 +6,9 @@
 //! `load_profile` (the 27 spheres), `rt10` (nuts and bolts, dt = 0.01 s, 10 Hz
 //! frames: the thesis's set-up), `rt60` (dt = frame = 1/60 s) or `hetero`
 //! (variant `even` / `slow`, with or without `_force`), or `pour` (the
-//! nuts-and-bolts pours of `scripts/bench_pour.sh`, variant = the commit).
+//! nuts-and-bolts pours of `scripts/bench_pour.sh`, variant = the commit), or
+//! `network` (`scripts/bench_network.sh`: ranks = PCs of a lab, variant =
+//! the link, `1pc` for one rank without a lab).
 //!
 //! Summaries that are missing (a run that failed or was cut off by the
 //! script's time limit) are listed and left out.
@@ -90,6 +92,15 @@ fn main() {
     for m in &missing {
         eprintln!("report: no summary for {m} (failed or cut off)");
     }
+    if !runs.is_empty() && runs.iter().all(|r| r.series == "network") {
+        // scripts/bench_network.sh: network.{csv,md,png} only; the other
+        // series' files of an earlier run stay as they are.
+        network(&runs, &out);
+        for m in &missing {
+            eprintln!("report: left out of network.md: {m}");
+        }
+        return;
+    }
     let mut md = String::new();
     load_profile(&runs, &out, &mut md);
     scaling(&runs, &out, &mut md);
@@ -97,6 +108,7 @@ fn main() {
     real_cores(&runs, &out, &mut md);
     real_cores_pour(&runs, &out, &mut md);
     pours(&runs, &out, &mut md);
+    network(&runs, &out);
     if !missing.is_empty() {
         let _ = writeln!(
             md,
@@ -961,4 +973,198 @@ fn real_cores_pour(runs: &[Run], out: &Path, md: &mut String) {
         if hashes_agree { "all equal" } else { "DIFFER" }
     );
     std::fs::write(out.join("cores_pour.csv"), csv).expect("write cores_pour.csv");
+}
+
+/// The network experiment of `scripts/bench_network.sh` (SPEC 4, thesis
+/// figs. 5.3–5.5): per scene, link and number of PCs, medians over the reps
+/// of wall per simulated second and worst frame, and what the network
+/// carried and decided: bytes per frame through rank 0's link, the measured
+/// round trip and link rate, and the share of each stage's runs that went to
+/// workers. `network.csv`, `network.md`, `network.png`.
+fn network(runs: &[Run], out: &Path) {
+    let rs: Vec<&Run> = runs.iter().filter(|r| r.series == "network").collect();
+    if rs.is_empty() {
+        return;
+    }
+    // One PC first, then the links fastest first (`100mbit` before `10mbit`).
+    let order = |link: &str| -> (u8, i64) {
+        let (num, unit) = link.split_at(link.find(|c: char| !c.is_ascii_digit()).unwrap_or(0));
+        let scale = match unit {
+            "gbit" => 1_000_000,
+            "mbit" => 1_000,
+            _ => 1,
+        };
+        match num.parse::<i64>() {
+            Ok(n) if link != "1pc" => (1, -n * scale),
+            _ => (0, 0),
+        }
+    };
+    // (bodies, link order, link, PCs).
+    type Key = (u64, (u8, i64), String, u32);
+    let mut groups: BTreeMap<Key, Vec<&Run>> = BTreeMap::new();
+    for r in &rs {
+        groups
+            .entry((r.bodies, order(&r.variant), r.variant.clone(), r.ranks))
+            .or_default()
+            .push(r);
+    }
+    let share = |s: &Value, stage: &str| {
+        let d = f(s, &["distributed", &format!("{stage}_distributed")]);
+        let l = f(s, &["distributed", &format!("{stage}_local")]);
+        if d + l > 0.0 { d / (d + l) } else { f64::NAN }
+    };
+    let mut csv = String::from(
+        "bodies,link,pcs,runs,hashes,sim_s,wall_per_sim_s,worst_frame_s,bytes_per_frame,round_trip_s,\
+         link_bytes_per_s,narrowphase_distributed,solve_distributed,groups_distributed\n",
+    );
+    let mut md = String::from(
+        "| bodies | link | PCs | runs | simulated [s] | wall / simulated | worst frame [s] | \
+         rank 0 bytes / frame | round trip [ms] | link measured [MB/s] | \
+         narrowphase / solve / groups distributed |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    // Per scene and link: (PCs, value) for the figure; one PC joins every link's line.
+    // Lines in the order of the table (by bodies, then link).
+    type Lines = Vec<(String, Vec<(f64, f64)>)>;
+    fn add(lines: &mut Lines, label: &str, point: (f64, f64)) {
+        match lines.iter_mut().find(|(l, _)| l == label) {
+            Some((_, points)) => points.push(point),
+            None => lines.push((label.to_string(), vec![point])),
+        }
+    }
+    let (mut wall, mut bytes, mut dist): (Lines, Lines, Lines) = Default::default();
+    let links: Vec<String> = {
+        let mut l: Vec<String> = rs
+            .iter()
+            .map(|r| r.variant.clone())
+            .filter(|v| v != "1pc")
+            .collect();
+        l.sort();
+        l.dedup();
+        l
+    };
+    for ((bodies, _, link, pcs), g) in &groups {
+        let m = |h: &dyn Fn(&Value) -> f64| median(&g.iter().map(|r| h(&r.s)).collect::<Vec<_>>());
+        let mut hashes: Vec<&str> = g
+            .iter()
+            .filter_map(|r| r.s["state_hash"].as_str())
+            .collect();
+        hashes.sort_unstable();
+        hashes.dedup();
+        let sim = m(&|s| f(s, &["sim_time_s"]));
+        let per_sim = m(&|s| f(s, &["wall_time_s"]) / f(s, &["sim_time_s"]));
+        let worst = m(&|s| f(s, &["worst_frame_s"]));
+        let bpf = m(&|s| {
+            let c = &s["per_rank"][0];
+            f(c, &["bytes_sent_per_frame"]) + f(c, &["bytes_received_per_frame"])
+        });
+        let rtt = m(&|s| f(s, &["distributed", "message_latency_s"]));
+        let rate = m(&|s| {
+            s["per_rank"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|p| p["link_bytes_per_s"].as_f64())
+                .fold(f64::NAN, f64::min)
+        });
+        let (np, so, gr) = (
+            m(&|s| share(s, "narrowphase")),
+            m(&|s| share(s, "solve")),
+            m(&|s| share(s, "groups")),
+        );
+        let _ = writeln!(
+            csv,
+            "{bodies},{link},{pcs},{},{},{sim},{per_sim:e},{worst:e},{bpf:e},{rtt:e},{rate:e},{np:.4},{so:.4},{gr:.4}",
+            g.len(),
+            hashes.join(" ")
+        );
+        let pct = |x: f64| {
+            if x.is_nan() {
+                "–".to_string()
+            } else {
+                format!("{:.0} %", 100.0 * x)
+            }
+        };
+        let _ = writeln!(
+            md,
+            "| {bodies} | {} | {pcs} | {} | {sim:.2} | {per_sim:.3} | {worst:.3} | {} | {} | {} | {} / {} / {} |",
+            if link == "1pc" { "–" } else { link.as_str() },
+            g.len(),
+            if *pcs > 1 {
+                format!("{bpf:.0}")
+            } else {
+                "–".into()
+            },
+            if *pcs > 1 {
+                format!("{:.2}", rtt * 1e3)
+            } else {
+                "–".into()
+            },
+            if rate.is_finite() {
+                format!("{:.2}", rate / 1e6)
+            } else {
+                "–".into()
+            },
+            pct(np),
+            pct(so),
+            pct(gr)
+        );
+        let lines: Vec<String> = if link == "1pc" {
+            links
+                .iter()
+                .map(|l| format!("{bodies} bodies, {l}"))
+                .collect()
+        } else {
+            vec![format!("{bodies} bodies, {link}")]
+        };
+        for line in lines {
+            add(&mut wall, &line, (*pcs as f64, per_sim));
+            if *pcs > 1 {
+                add(&mut bytes, &line, (*pcs as f64, bpf));
+                add(&mut dist, &line, (*pcs as f64, gr));
+            }
+        }
+    }
+    std::fs::write(out.join("network.csv"), csv).expect("write network.csv");
+    std::fs::write(out.join("network.md"), md).expect("write network.md");
+    let panel = |title: &str, y: &str, y_log: bool, lines: Lines| plot::Panel {
+        title: title.into(),
+        x_label: "PCs (one rank each)".into(),
+        y_label: y.into(),
+        y_log,
+        series: lines
+            .into_iter()
+            .map(|(label, mut points)| {
+                points.sort_by(|a, b| a.0.total_cmp(&b.0));
+                plot::Series {
+                    label,
+                    points,
+                    thin: false,
+                }
+            })
+            .collect(),
+        ..Default::default()
+    };
+    let panels = [
+        panel(
+            "wall time per simulated second",
+            "wall / simulated",
+            true,
+            wall,
+        ),
+        panel(
+            "bytes per frame through rank 0's link",
+            "bytes / frame",
+            true,
+            bytes,
+        ),
+        panel("group steps distributed", "share of steps", false, dist),
+    ];
+    if let Err(e) = plot::draw(
+        &out.join("network.png"),
+        "The network experiment: a lab in a box at 100 and 10 Mbit/s",
+        &panels,
+        3,
+    ) {
+        eprintln!("report: {e}");
+    }
 }
