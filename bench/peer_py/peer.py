@@ -469,14 +469,17 @@ class MuJoCo:
             if self.frozen[i] is not None:
                 out.append(self.frozen[i])
                 continue
-            bid = self.badr[i]
-            x = list(d.xpos[bid])
-            qe = tuple(d.xquat[bid])
-            q = qnorm(qmul(qe, qconj(self.rp[i])))
             if self.jadr[i] is None:
-                s = (x, q, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+                bid = self.badr[i]
+                x, qe = list(d.xpos[bid]), tuple(d.xquat[bid])
+                s = (x, qnorm(qmul(qe, qconj(self.rp[i]))), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
             else:
-                dof = self.jadr[i][1]
+                # The free joint's qpos, not xpos/xquat: those are computed
+                # at the start of mj_step, one step behind its integration.
+                adr, dof = self.jadr[i]
+                x = list(d.qpos[adr : adr + 3])
+                qe = tuple(d.qpos[adr + 3 : adr + 7])
+                q = qnorm(qmul(qe, qconj(self.rp[i])))
                 v = list(d.qvel[dof : dof + 3])
                 w = list(qmat(qe) @ d.qvel[dof + 3 : dof + 6])
                 s = (x, q, v, w)

@@ -388,6 +388,21 @@ fn ratio(a: f64, b: f64) -> String {
     }
 }
 
+/// What a MuJoCo record says of divergence (`bench/peer_py/peer.py`).
+fn divergence(l: &Value) -> String {
+    let m = &l["mapping"];
+    match (
+        m["diverged_with_mapped_restitution_at_s"].as_f64(),
+        m["diverged_again_at_s"].as_f64(),
+    ) {
+        (Some(a), Some(b)) => format!(
+            "diverged at {a:.2} s with the mapped restitution, and at {b:.2} s with damping ratio 1 (MuJoCo then resets the state)"
+        ),
+        (Some(a), None) => format!("diverged at {a:.2} s with the mapped restitution; run with damping ratio 1 (no rebound)"),
+        _ => String::new(),
+    }
+}
+
 fn report(args: &[String]) {
     let (free, o) = options(args);
     let input = free.first().unwrap_or_else(|| fail("report FILE.jsonl --out DIR"));
@@ -396,7 +411,13 @@ fn report(args: &[String]) {
     let text = std::fs::read_to_string(input).unwrap_or_else(|e| fail(&format!("{input}: {e}")));
     let mut lines: Vec<Value> = text.lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
     lines.sort_by(|a, b| {
-        let key = |l: &Value| (l["case"].as_str().unwrap_or("").to_string(), engine_rank(l["engine"].as_str().unwrap_or("")));
+        let key = |l: &Value| {
+            (
+                l["bodies"].as_u64().unwrap_or(0),
+                l["case"].as_str().unwrap_or("").to_string(),
+                engine_rank(l["engine"].as_str().unwrap_or("")),
+            )
+        };
         key(a).cmp(&key(b)).then(a["dt"].as_f64().unwrap_or(0.0).total_cmp(&b["dt"].as_f64().unwrap_or(0.0)))
     });
     let cases = harness::cases();
@@ -459,7 +480,7 @@ fn report(args: &[String]) {
     dts.dedup();
     for &dt in &dts {
         let _ = writeln!(md, "### Exact cases, dt = {dt} s\n");
-        md.push_str("| case | engine | RTF | time ratio | measure | error | error ratio |\n|---|---|---|---|---|---|---|\n");
+        md.push_str("| case | engine | RTF | time ratio | measure | error | error ratio | note |\n|---|---|---|---|---|---|---|---|\n");
         for case in &cases {
             let Some(reference) = find(case.name, "rigidsim", dt) else { continue };
             for engine in ENGINES {
@@ -468,12 +489,13 @@ fn report(args: &[String]) {
                     let (e, r) = (f(&l["metrics"], m), f(&reference["metrics"], m));
                     let _ = writeln!(
                         md,
-                        "| {} | {engine} | {} | {} | {m} [{unit}] | {} | {} |",
+                        "| {} | {engine} | {} | {} | {m} [{unit}] | {} | {} | {} |",
                         if k == 0 { case.name } else { "" },
                         if k == 0 { format!("{:.1}", f(l, "realtime_factor")) } else { String::new() },
                         if k == 0 { ratio(f(l, "wall_s"), f(reference, "wall_s")) } else { String::new() },
                         fmt(e),
-                        if engine == "rigidsim" { "—".into() } else { ratio(e, r) }
+                        if engine == "rigidsim" { "—".into() } else { ratio(e, r) },
+                        if k == 0 { divergence(l) } else { String::new() }
                     );
                 }
             }
@@ -483,7 +505,7 @@ fn report(args: &[String]) {
     let pours: Vec<&Value> = lines.iter().filter(|l| l["kind"] == "pour").collect();
     if !pours.is_empty() {
         md.push_str("### Pours of nuts and bolts onto the 2 m floor\n\n");
-        md.push_str("| bodies | engine | threads | simulated [s] | wall [s] | RTF | worst 0.1 s frame [s] | deepest overlap [m] | time to rest [s] | fallen | wall ratio | overlap ratio |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        md.push_str("| bodies | engine | threads | simulated [s] | wall [s] | RTF | worst 0.1 s frame [s] | deepest overlap [m] | time to rest [s] | fallen | wall ratio | overlap ratio | note |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for l in &pours {
             let reference = pours
                 .iter()
@@ -500,7 +522,7 @@ fn report(args: &[String]) {
             });
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.2} | {:.3} | {:.2} | {:.4} | {} | {} | {} | {wr} | {or} |",
+                "| {} | {} | {} | {:.2} | {:.3} | {:.2} | {:.4} | {} | {} | {} | {wr} | {or} | {} |",
                 l["bodies"],
                 l["engine"].as_str().unwrap_or(""),
                 l["threads"],
@@ -509,8 +531,13 @@ fn report(args: &[String]) {
                 f(l, "realtime_factor"),
                 f(l, "worst_frame_s"),
                 fmt(f(l, "deepest_overlap_m")),
-                l["rest_time_s"].as_f64().map_or("not within the run".into(), |t| format!("{t:.2}")),
-                l["fallen"]
+                // Resting only at the last sample is not coming to rest.
+                l["rest_time_s"]
+                    .as_f64()
+                    .filter(|&t| t < f(l, "sim_time_s"))
+                    .map_or("not within the run".into(), |t| format!("{t:.2}")),
+                l["fallen"],
+                divergence(l)
             );
         }
         md.push_str(
