@@ -15,7 +15,7 @@
 #   mujoco_default/_hard     bench/peer_py (mujoco): default, and elliptic cones,
 #                          impratio 10, noslip_iterations 10
 # pybullet and mujoco come from PyPI as binary wheels into a virtual
-# environment this script creates ($CARGO_TARGET_DIR/peer-venv); where one
+# environment this script creates ($PEER_VENV, default $CARGO_TARGET_DIR/peer-venv); where one
 # cannot be installed, one line says which and why and the others still run.
 #
 # Usage: scripts/bench_peer.sh [--tiny] [--reps N] [--pour-reps N] [--dts 1e-3,1e-2]
@@ -60,6 +60,7 @@ mkdir -p "$out"
 work=$(mktemp -d)
 if [ "${KEEP_RUNS:-0}" = 1 ]; then echo "bench_peer: runs kept in $work"; else trap 'rm -rf "$work"' EXIT; fi
 started=$(date +%s)
+root=$(pwd)
 
 # Builds: the simulator, the yardstick, Rapier twice (serial, and with its
 # `parallel` feature; both variants stay cached in the one target folder).
@@ -73,7 +74,8 @@ yardstick=$target/release/yardstick
 
 # The Python peers' environment: binary wheels only, pinned versions that
 # install on Debian 12's Python 3.11 (and on later Pythons with wheels).
-venv=$target/peer-venv
+venv=${PEER_VENV:-$target/peer-venv}
+[[ $venv = /* ]] || venv=$root/$venv
 have_bullet=0 have_mujoco=0
 if [ ! -x "$venv/bin/python" ]; then
   python3 -m venv "$venv" >/dev/null 2>&1 || rm -rf "$venv"
@@ -82,12 +84,12 @@ if [ -x "$venv/bin/python" ]; then
   pipq() { "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --only-binary :all: "$@" 2>"$work/pip.err"; }
   why() { grep -m1 -E 'ERROR|No matching' "$work/pip.err" | cut -c1-160; }
   if ! "$venv/bin/python" -c 'import numpy' 2>/dev/null && ! pipq numpy==2.4.6; then
-    echo "bench_peer: bullet and mujoco skipped: numpy 2.4.6 has no binary wheel here ($(why))"
+    echo "bench_peer: bullet and mujoco skipped: numpy 2.4.6 could not be installed as a binary wheel (pip: $(why))"
   else
     if "$venv/bin/python" -c 'import pybullet' 2>/dev/null || pipq pybullet==3.2.7; then have_bullet=1
-    else echo "bench_peer: bullet skipped: pybullet 3.2.7 has no binary wheel for this Python/platform ($(why))"; fi
+    else echo "bench_peer: bullet skipped: pybullet 3.2.7 could not be installed as a binary wheel (pip: $(why))"; fi
     if "$venv/bin/python" -c 'import mujoco' 2>/dev/null || pipq mujoco==3.3.7; then have_mujoco=1
-    else echo "bench_peer: mujoco skipped: mujoco 3.3.7 has no binary wheel for this Python/platform ($(why))"; fi
+    else echo "bench_peer: mujoco skipped: mujoco 3.3.7 could not be installed as a binary wheel (pip: $(why))"; fi
   fi
 else
   echo "bench_peer: bullet and mujoco skipped: python3 cannot create a virtual environment (Debian: apt-get install python3-venv)"
@@ -145,8 +147,9 @@ EOF
         --sample-every "$every" --frame "$frame" --reps "$n" --trajectory "$dir/trajectory.csv" --record "$dir/record.json" ;;
     bullet_*|mujoco_*)
       local e=${engine%%_*} c=${engine#*_}
-      "$venv/bin/python" bench/peer_py/peer.py "$e" "$c" "$bodies" --duration "$dur" --sample-every "$every" \
-        --frame "$frame" --reps "$n" --trajectory "$dir/trajectory.csv" --record "$dir/record.json" >/dev/null ;;
+      # In the run's folder: MuJoCo writes MUJOCO_LOG.TXT where it runs.
+      (cd "$dir" && "$venv/bin/python" "$root/bench/peer_py/peer.py" "$e" "$c" "$bodies" --duration "$dur" \
+        --sample-every "$every" --frame "$frame" --reps "$n" --trajectory trajectory.csv --record record.json >/dev/null) ;;
   esac
 }
 

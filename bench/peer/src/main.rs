@@ -67,7 +67,9 @@ fn options(args: &[String]) -> (Vec<String>, BTreeMap<String, String>) {
             if name == "tiny" {
                 opts.insert(name.to_string(), String::new());
             } else {
-                let v = args.get(i + 1).unwrap_or_else(|| fail(&format!("--{name} needs a value")));
+                let v = args
+                    .get(i + 1)
+                    .unwrap_or_else(|| fail(&format!("--{name} needs a value")));
                 opts.insert(name.to_string(), v.clone());
                 i += 1;
             }
@@ -86,7 +88,11 @@ fn scenes(args: &[String]) {
     let tiny = opts.contains_key("tiny");
     let dts: Vec<f64> = opts
         .get("dts")
-        .map(|s| s.split(',').map(|x| x.parse().unwrap_or_else(|_| fail("--dts 1e-3,1e-2"))).collect())
+        .map(|s| {
+            s.split(',')
+                .map(|x| x.parse().unwrap_or_else(|_| fail("--dts 1e-3,1e-2")))
+                .collect()
+        })
         .unwrap_or_else(|| vec![1e-2]);
     for mut case in harness::cases() {
         if tiny {
@@ -105,13 +111,25 @@ fn scenes(args: &[String]) {
 /// `measure` reads. Its trajectory comes from the CLI (`rigidsim SCENE`).
 fn time(args: &[String]) {
     let (free, o) = options(args);
-    let path = free.first().unwrap_or_else(|| fail("time SCENE.toml --duration S --record JSON"));
-    let get = |k: &str| o.get(k).cloned().unwrap_or_else(|| fail(&format!("time needs --{k}")));
-    let num = |k: &str, d: f64| o.get(k).map_or(d, |v| v.parse().unwrap_or_else(|_| fail(&format!("--{k} S"))));
+    let path = free
+        .first()
+        .unwrap_or_else(|| fail("time SCENE.toml --duration S --record JSON"));
+    let get = |k: &str| {
+        o.get(k)
+            .cloned()
+            .unwrap_or_else(|| fail(&format!("time needs --{k}")))
+    };
+    let num = |k: &str, d: f64| {
+        o.get(k).map_or(d, |v| {
+            v.parse().unwrap_or_else(|_| fail(&format!("--{k} S")))
+        })
+    };
     let duration = num("duration", f64::NAN);
     let (frame, reps) = (num("frame", 0.1), num("reps", 1.0) as usize);
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| fail(&format!("{path}: {e}")));
-    let dir = std::path::Path::new(path).parent().unwrap_or(std::path::Path::new("."));
+    let dir = std::path::Path::new(path)
+        .parent()
+        .unwrap_or(std::path::Path::new("."));
     let mut scene = rigidsim::scene::from_str(&text, std::path::Path::new(path), dir)
         .unwrap_or_else(|e| fail(&e.to_string()));
     scene.settings.render = None;
@@ -171,10 +189,17 @@ fn oracle_of(export: &Value) -> (Oracle, Vec<bool>, f64) {
                 .collect()
         })
         .collect();
-    let bodies = export["bodies"].as_array().unwrap_or_else(|| fail("bodies file: no bodies"));
-    let object_of = bodies.iter().map(|b| b["object"].as_u64().unwrap() as usize).collect();
+    let bodies = export["bodies"]
+        .as_array()
+        .unwrap_or_else(|| fail("bodies file: no bodies"));
+    let object_of = bodies
+        .iter()
+        .map(|b| b["object"].as_u64().unwrap() as usize)
+        .collect();
     let dynamic: Vec<bool> = bodies.iter().map(|b| b["kind"] == "dynamic").collect();
-    let fall_z = export["world"]["fall_z"].as_f64().unwrap_or(f64::NEG_INFINITY);
+    let fall_z = export["world"]["fall_z"]
+        .as_f64()
+        .unwrap_or(f64::NEG_INFINITY);
     let oracle = Oracle::from_parts(&objects, object_of, dynamic.clone(), fall_z)
         .unwrap_or_else(|e| fail(&e));
     (oracle, dynamic, fall_z)
@@ -191,7 +216,10 @@ fn read_trajectory(path: &str, bodies: usize) -> Vec<(f64, Vec<Snap>)> {
     for (n, line) in lines.enumerate() {
         let c: Vec<f64> = line
             .split(',')
-            .map(|x| x.parse().unwrap_or_else(|_| fail(&format!("{path}:{}: bad number {x}", n + 2))))
+            .map(|x| {
+                x.parse()
+                    .unwrap_or_else(|_| fail(&format!("{path}:{}: bad number {x}", n + 2)))
+            })
             .collect();
         if c.len() != 15 {
             fail(&format!("{path}:{}: {} columns, not 15", n + 2, c.len()));
@@ -211,14 +239,18 @@ fn read_trajectory(path: &str, bodies: usize) -> Vec<(f64, Vec<Snap>)> {
             }
             out.push((c[0], Vec::with_capacity(bodies)));
         }
-        let last = out.last_mut().unwrap_or_else(|| fail(&format!("{path}: rows do not start at body 0")));
+        let last = out
+            .last_mut()
+            .unwrap_or_else(|| fail(&format!("{path}: rows do not start at body 0")));
         if last.1.len() != body || last.0 != c[0] {
             fail(&format!("{path}:{}: rows out of order", n + 2));
         }
         last.1.push(snap);
     }
     if out.iter().any(|s| s.1.len() != bodies) {
-        fail(&format!("{path}: a sample lacks bodies ({bodies} in the bodies file)"));
+        fail(&format!(
+            "{path}: a sample lacks bodies ({bodies} in the bodies file)"
+        ));
     }
     out
 }
@@ -228,7 +260,9 @@ fn median(v: &[f64]) -> f64 {
 }
 
 fn nums(v: &Value) -> Vec<f64> {
-    v.as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default()
+    v.as_array()
+        .map(|a| a.iter().filter_map(Value::as_f64).collect())
+        .unwrap_or_default()
 }
 
 fn num_or_null(x: f64) -> Value {
@@ -237,7 +271,11 @@ fn num_or_null(x: f64) -> Value {
 
 fn measure(args: &[String]) {
     let (_, o) = options(args);
-    let get = |k: &str| o.get(k).cloned().unwrap_or_else(|| fail(&format!("measure needs --{k}")));
+    let get = |k: &str| {
+        o.get(k)
+            .cloned()
+            .unwrap_or_else(|| fail(&format!("measure needs --{k}")))
+    };
     let (engine, out) = (get("engine"), get("out"));
     let export = read_json(&get("bodies"));
     let record = read_json(&get("record"));
@@ -276,7 +314,12 @@ fn measure(args: &[String]) {
                 record["steps"]
             ));
         }
-        let mut probe = Probe::with_oracle(&case, &scene, &samples[0].1, case.has_contacts().then_some(oracle));
+        let mut probe = Probe::with_oracle(
+            &case,
+            &scene,
+            &samples[0].1,
+            case.has_contacts().then_some(oracle),
+        );
         for (t, snaps) in &samples[1..] {
             probe.observe(*t, snaps);
         }
@@ -307,7 +350,11 @@ fn measure(args: &[String]) {
             }
         }
         let last = &samples.last().unwrap_or_else(|| fail("empty trajectory")).1;
-        let fallen = last.iter().zip(&dynamic).filter(|(s, d)| **d && s.position.z < fall_z).count();
+        let fallen = last
+            .iter()
+            .zip(&dynamic)
+            .filter(|(s, d)| **d && s.position.z < fall_z)
+            .count();
         line["kind"] = json!("pour");
         line["case"] = json!(format!("pour{count}"));
         line["dt"] = export["world"]["dt"].clone();
@@ -343,7 +390,9 @@ fn summary_line(l: &Value) -> String {
             " wall {:.3} s, overlap {} m, rest {}",
             l["wall_s"].as_f64().unwrap_or(f64::NAN),
             fmt(l["deepest_overlap_m"].as_f64().unwrap_or(f64::NAN)),
-            l["rest_time_s"].as_f64().map_or("never".into(), |t| format!("{t:.2} s"))
+            l["rest_time_s"]
+                .as_f64()
+                .map_or("never".into(), |t| format!("{t:.2} s"))
         );
     }
     s
@@ -367,20 +416,31 @@ const ENGINES: [&str; 9] = [
 ];
 
 fn engine_rank(e: &str) -> usize {
-    ENGINES.iter().position(|x| *x == e).unwrap_or(ENGINES.len())
+    ENGINES
+        .iter()
+        .position(|x| *x == e)
+        .unwrap_or(ENGINES.len())
 }
 
 /// The reference an engine's ratios are taken against: rigidsim on as many
 /// processors as the engine uses (2 ranks against 2 threads).
 fn reference_of(l: &Value) -> &'static str {
-    if l["threads"].as_u64().unwrap_or(1) > 1 { "rigidsim_np2" } else { "rigidsim" }
+    if l["threads"].as_u64().unwrap_or(1) > 1 {
+        "rigidsim_np2"
+    } else {
+        "rigidsim"
+    }
 }
 
 fn ratio(a: f64, b: f64) -> String {
     if !a.is_finite() || !b.is_finite() {
         "n/a".into()
     } else if b == 0.0 {
-        if a == 0.0 { "both 0".into() } else { "ref. exact".into() }
+        if a == 0.0 {
+            "both 0".into()
+        } else {
+            "ref. exact".into()
+        }
     } else if a / b < 0.01 || a / b > 1000.0 {
         format!("{:.1e}", a / b)
     } else {
@@ -398,18 +458,29 @@ fn divergence(l: &Value) -> String {
         (Some(a), Some(b)) => format!(
             "diverged at {a:.2} s with the mapped restitution, and at {b:.2} s with damping ratio 1 (MuJoCo then resets the state)"
         ),
-        (Some(a), None) => format!("diverged at {a:.2} s with the mapped restitution; run with damping ratio 1 (no rebound)"),
+        (Some(a), None) => format!(
+            "diverged at {a:.2} s with the mapped restitution; run with damping ratio 1 (no rebound)"
+        ),
         _ => String::new(),
     }
 }
 
 fn report(args: &[String]) {
     let (free, o) = options(args);
-    let input = free.first().unwrap_or_else(|| fail("report FILE.jsonl --out DIR"));
-    let out = PathBuf::from(o.get("out").cloned().unwrap_or_else(|| fail("report needs --out DIR")));
+    let input = free
+        .first()
+        .unwrap_or_else(|| fail("report FILE.jsonl --out DIR"));
+    let out = PathBuf::from(
+        o.get("out")
+            .cloned()
+            .unwrap_or_else(|| fail("report needs --out DIR")),
+    );
     std::fs::create_dir_all(&out).unwrap_or_else(|e| fail(&format!("{}: {e}", out.display())));
     let text = std::fs::read_to_string(input).unwrap_or_else(|e| fail(&format!("{input}: {e}")));
-    let mut lines: Vec<Value> = text.lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+    let mut lines: Vec<Value> = text
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
     lines.sort_by(|a, b| {
         let key = |l: &Value| {
             (
@@ -418,12 +489,19 @@ fn report(args: &[String]) {
                 engine_rank(l["engine"].as_str().unwrap_or("")),
             )
         };
-        key(a).cmp(&key(b)).then(a["dt"].as_f64().unwrap_or(0.0).total_cmp(&b["dt"].as_f64().unwrap_or(0.0)))
+        key(a).cmp(&key(b)).then(
+            a["dt"]
+                .as_f64()
+                .unwrap_or(0.0)
+                .total_cmp(&b["dt"].as_f64().unwrap_or(0.0)),
+        )
     });
     let cases = harness::cases();
     let f = |l: &Value, k: &str| l[k].as_f64().unwrap_or(f64::NAN);
     let find = |case: &str, engine: &str, dt: f64| {
-        lines.iter().find(|l| l["case"] == case && l["engine"] == engine && f(l, "dt") == dt)
+        lines
+            .iter()
+            .find(|l| l["case"] == case && l["engine"] == engine && f(l, "dt") == dt)
     };
 
     // Long CSV: one row per run and measure.
@@ -433,7 +511,10 @@ fn report(args: &[String]) {
     for l in &lines {
         let mut measures: Vec<(String, f64)> = Vec::new();
         if let Some(m) = l["metrics"].as_object() {
-            measures.extend(m.iter().map(|(k, v)| (k.clone(), v.as_f64().unwrap_or(f64::NAN))));
+            measures.extend(
+                m.iter()
+                    .map(|(k, v)| (k.clone(), v.as_f64().unwrap_or(f64::NAN))),
+            );
         } else {
             for k in ["deepest_overlap_m", "rest_time_s", "fallen"] {
                 measures.push((k.into(), f(l, k)));
@@ -473,28 +554,49 @@ fn report(args: &[String]) {
          means the engine is faster, error ratio below 1 more accurate.\n\n",
         harness::machine_description(),
         o.get("commit").map_or("unknown", String::as_str),
-        o.get("command").map_or("scripts/bench_peer.sh", String::as_str)
+        o.get("command")
+            .map_or("scripts/bench_peer.sh", String::as_str)
     );
-    let mut dts: Vec<f64> = lines.iter().filter(|l| l["kind"] == "case").map(|l| f(l, "dt")).collect();
+    let mut dts: Vec<f64> = lines
+        .iter()
+        .filter(|l| l["kind"] == "case")
+        .map(|l| f(l, "dt"))
+        .collect();
     dts.sort_by(f64::total_cmp);
     dts.dedup();
     for &dt in &dts {
         let _ = writeln!(md, "### Exact cases, dt = {dt} s\n");
         md.push_str("| case | engine | RTF | time ratio | measure | error | error ratio | note |\n|---|---|---|---|---|---|---|---|\n");
         for case in &cases {
-            let Some(reference) = find(case.name, "rigidsim", dt) else { continue };
+            let Some(reference) = find(case.name, "rigidsim", dt) else {
+                continue;
+            };
             for engine in ENGINES {
-                let Some(l) = find(case.name, engine, dt) else { continue };
+                let Some(l) = find(case.name, engine, dt) else {
+                    continue;
+                };
                 for (k, &(m, unit)) in case.metrics.iter().enumerate() {
                     let (e, r) = (f(&l["metrics"], m), f(&reference["metrics"], m));
                     let _ = writeln!(
                         md,
                         "| {} | {engine} | {} | {} | {m} [{unit}] | {} | {} | {} |",
                         if k == 0 { case.name } else { "" },
-                        if k == 0 { format!("{:.1}", f(l, "realtime_factor")) } else { String::new() },
-                        if k == 0 { ratio(f(l, "wall_s"), f(reference, "wall_s")) } else { String::new() },
+                        if k == 0 {
+                            format!("{:.1}", f(l, "realtime_factor"))
+                        } else {
+                            String::new()
+                        },
+                        if k == 0 {
+                            ratio(f(l, "wall_s"), f(reference, "wall_s"))
+                        } else {
+                            String::new()
+                        },
                         fmt(e),
-                        if engine == "rigidsim" { "—".into() } else { ratio(e, r) },
+                        if engine == "rigidsim" {
+                            "—".into()
+                        } else {
+                            ratio(e, r)
+                        },
                         if k == 0 { divergence(l) } else { String::new() }
                     );
                 }
@@ -516,9 +618,15 @@ fn report(args: &[String]) {
                     (f(l, "wall_s"), f(r, "wall_s"))
                 } else {
                     // A capped run: wall per simulated second.
-                    (f(l, "wall_s") / f(l, "sim_time_s"), f(r, "wall_s") / f(r, "sim_time_s"))
+                    (
+                        f(l, "wall_s") / f(l, "sim_time_s"),
+                        f(r, "wall_s") / f(r, "sim_time_s"),
+                    )
                 };
-                (ratio(wa, wb), ratio(f(l, "deepest_overlap_m"), f(r, "deepest_overlap_m")))
+                (
+                    ratio(wa, wb),
+                    ratio(f(l, "deepest_overlap_m"), f(r, "deepest_overlap_m")),
+                )
             });
             let _ = writeln!(
                 md,
@@ -548,7 +656,13 @@ fn report(args: &[String]) {
     }
     let mut versions: Vec<String> = lines
         .iter()
-        .map(|l| format!("{}: {}", l["engine"].as_str().unwrap_or(""), l["version"].as_str().unwrap_or("")))
+        .map(|l| {
+            format!(
+                "{}: {}",
+                l["engine"].as_str().unwrap_or(""),
+                l["version"].as_str().unwrap_or("")
+            )
+        })
         .collect();
     versions.sort();
     versions.dedup();
@@ -556,7 +670,14 @@ fn report(args: &[String]) {
     let mut maps: Vec<String> = lines
         .iter()
         .filter(|l| l["kind"] == "case" || l["kind"] == "pour")
-        .map(|l| format!("{} {}: {}", l["case"].as_str().unwrap_or(""), l["engine"].as_str().unwrap_or(""), l["mapping"]))
+        .map(|l| {
+            format!(
+                "{} {}: {}",
+                l["case"].as_str().unwrap_or(""),
+                l["engine"].as_str().unwrap_or(""),
+                l["mapping"]
+            )
+        })
         .collect();
     maps.dedup();
     std::fs::write(out.join("peers.md"), md).unwrap_or_else(|e| fail(&format!("peers.md: {e}")));
@@ -583,9 +704,18 @@ fn report(args: &[String]) {
                         let points: Vec<(f64, f64)> = dts
                             .iter()
                             .filter_map(|&dt| find(case.name, e, dt))
-                            .map(|l| (f(l, "realtime_factor"), harness::floor_zero(f(&l["metrics"], m))))
+                            .map(|l| {
+                                (
+                                    f(l, "realtime_factor"),
+                                    harness::floor_zero(f(&l["metrics"], m)),
+                                )
+                            })
                             .collect();
-                        (!points.is_empty()).then(|| plot::Series { label: e.into(), points, thin: false })
+                        (!points.is_empty()).then(|| plot::Series {
+                            label: e.into(),
+                            points,
+                            thin: false,
+                        })
                     })
                     .collect(),
                 vlines: vec![(1.0, "real time".into())],
@@ -597,5 +727,9 @@ fn report(args: &[String]) {
             eprintln!("yardstick: plot failed: {e}");
         }
     }
-    eprintln!("yardstick: {} runs; tables in {}", lines.len(), out.join("peers.md").display());
+    eprintln!(
+        "yardstick: {} runs; tables in {}",
+        lines.len(),
+        out.join("peers.md").display()
+    );
 }

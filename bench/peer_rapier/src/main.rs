@@ -258,17 +258,26 @@ fn write_rows(out: &mut String, t: f64, states: &[State]) {
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let config = args.next().unwrap_or_else(|| fail("usage: rapier-peer CONFIG BODIES ..."));
-    let bodies = args.next().unwrap_or_else(|| fail("usage: rapier-peer CONFIG BODIES ..."));
+    let config = args
+        .next()
+        .unwrap_or_else(|| fail("usage: rapier-peer CONFIG BODIES ..."));
+    let bodies = args
+        .next()
+        .unwrap_or_else(|| fail("usage: rapier-peer CONFIG BODIES ..."));
     let (mut duration, mut trajectory, mut record) = (None, None, None);
     let (mut sample_every, mut frame, mut reps) = (1u64, 0.1f64, 1usize);
     while let Some(a) = args.next() {
-        let mut val = || args.next().unwrap_or_else(|| fail(&format!("{a} needs a value")));
+        let mut val = || {
+            args.next()
+                .unwrap_or_else(|| fail(&format!("{a} needs a value")))
+        };
         match a.as_str() {
             "--duration" => duration = val().parse::<f64>().ok(),
             "--trajectory" => trajectory = Some(val()),
             "--record" => record = Some(val()),
-            "--sample-every" => sample_every = val().parse().unwrap_or_else(|_| fail("--sample-every N")),
+            "--sample-every" => {
+                sample_every = val().parse().unwrap_or_else(|_| fail("--sample-every N"))
+            }
             "--frame" => frame = val().parse().unwrap_or_else(|_| fail("--frame S")),
             "--reps" => reps = val().parse().unwrap_or_else(|_| fail("--reps N")),
             other => fail(&format!("unknown argument {other}")),
@@ -280,9 +289,13 @@ fn main() {
         record.unwrap_or_else(|| fail("--record JSON is required")),
     );
     let text = std::fs::read_to_string(&bodies).unwrap_or_else(|e| fail(&format!("{bodies}: {e}")));
-    let e: Export = serde_json::from_str(&text).unwrap_or_else(|err| fail(&format!("{bodies}: {err}")));
+    let e: Export =
+        serde_json::from_str(&text).unwrap_or_else(|err| fail(&format!("{bodies}: {err}")));
     if e.format != 1 {
-        fail(&format!("{bodies}: export format {} (this peer reads 1)", e.format));
+        fail(&format!(
+            "{bodies}: export format {} (this peer reads 1)",
+            e.format
+        ));
     }
     let length_unit = match config.as_str() {
         "default" => None,
@@ -327,7 +340,10 @@ fn main() {
         worsts.push(worst);
     }
     #[cfg(feature = "parallel")]
-    let (name, threads) = (format!("rapier_{config}_parallel"), rayon::current_num_threads());
+    let (name, threads) = (
+        format!("rapier_{config}_parallel"),
+        rayon::current_num_threads(),
+    );
     #[cfg(not(feature = "parallel"))]
     let (name, threads) = (format!("rapier_{config}"), 1usize);
     let rec = serde_json::json!({
@@ -343,6 +359,7 @@ fn main() {
         "mapping": { "length_unit": length_unit.unwrap_or(1.0),
                      "rule": "Rapier's own combine rule set to rigidsim's" },
     });
-    let mut f = std::fs::File::create(&record).unwrap_or_else(|err| fail(&format!("{record}: {err}")));
+    let mut f =
+        std::fs::File::create(&record).unwrap_or_else(|err| fail(&format!("{record}: {err}")));
     let _ = writeln!(f, "{rec}");
 }
