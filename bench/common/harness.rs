@@ -159,6 +159,43 @@ impl Oracle {
         }
     }
 
+    /// The oracle over parts given as vertex lists (e.g. read back from
+    /// `rigidsim export`'s file): per object its convex parts, then per body
+    /// its object, whether it is dynamic, and the scene's `fall_z`.
+    pub fn from_parts(
+        objects: &[Vec<Vec<[f64; 3]>>],
+        object_of: Vec<usize>,
+        dynamic: Vec<bool>,
+        fall_z: f64,
+    ) -> Result<Oracle, String> {
+        let mut parts = Vec::new();
+        let mut radius = Vec::new();
+        for (i, o) in objects.iter().enumerate() {
+            let mut polys = Vec::new();
+            let mut r: f64 = 0.0;
+            for p in o {
+                let pts: Vec<PVec> = p.iter().map(|v| PVec::new(v[0], v[1], v[2])).collect();
+                r = p
+                    .iter()
+                    .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+                    .fold(r, f64::max);
+                polys.push(
+                    ParryPoly::from_convex_hull(&pts)
+                        .ok_or_else(|| format!("object {i}: a part is not a convex solid"))?,
+                );
+            }
+            parts.push(polys);
+            radius.push(r);
+        }
+        Ok(Oracle {
+            parts,
+            radius,
+            object_of,
+            dynamic,
+            fall_z,
+        })
+    }
+
     /// Deepest overlap (metres) between any two bodies in these states.
     pub fn deepest(&self, snaps: &[Snap]) -> f64 {
         let mut deepest: f64 = 0.0;
@@ -398,6 +435,18 @@ pub struct Probe {
 
 impl Probe {
     pub fn new(case: &Case, scene: &Scene, initial: &[Snap]) -> Probe {
+        let oracle = case.has_contacts().then(|| Oracle::new(scene));
+        Probe::with_oracle(case, scene, initial, oracle)
+    }
+
+    /// The same probe with a given overlap oracle (`None`: overlaps not
+    /// measured).
+    pub fn with_oracle(
+        case: &Case,
+        scene: &Scene,
+        initial: &[Snap],
+        oracle: Option<Oracle>,
+    ) -> Probe {
         let e0: f64 = (0..initial.len())
             .map(|i| kinetic_energy(scene, i, &initial[i]))
             .sum();
@@ -419,7 +468,7 @@ impl Probe {
             impacts: Vec::new(),
             last: initial.to_vec(),
             time: 0.0,
-            oracle: case.has_contacts().then(|| Oracle::new(scene)),
+            oracle,
             penetration: 0.0,
         }
     }
