@@ -957,11 +957,19 @@ impl LcpWorkspace {
             if f.body.len() != n || f.jacobian.len() != n || f.response.len() != n {
                 return Err(invalid(format!("factors do not have {n} rows")));
             }
-            if let Some(i) = f.body.iter().position(|b| b.iter().any(|&k| k as usize >= f.bodies)) {
-                return Err(invalid(format!("factors: row {i} names a body past {}", f.bodies)));
+            if let Some(i) = f
+                .body
+                .iter()
+                .position(|b| b.iter().any(|&k| k as usize >= f.bodies))
+            {
+                return Err(invalid(format!(
+                    "factors: row {i} names a body past {}",
+                    f.bodies
+                )));
             }
             let finite = |rows: &[[[f64; 6]; 2]]| {
-                rows.iter().position(|r| r.iter().flatten().any(|v| !v.is_finite()))
+                rows.iter()
+                    .position(|r| r.iter().flatten().any(|v| !v.is_finite()))
             };
             if let Some(i) = finite(f.jacobian).or(finite(f.response)) {
                 return Err(non_finite("factors", i));

@@ -245,9 +245,8 @@ impl Row {
 
     /// J on A and on B, linear then angular (for `lcp::RowFactors`).
     fn jacobian(&self) -> [[f64; 6]; 2] {
-        let side = |lin: Vector3<f64>, ang: Vector3<f64>| {
-            [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z]
-        };
+        let side =
+            |lin: Vector3<f64>, ang: Vector3<f64>| [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z];
         [side(self.lin, self.ang_a), side(-self.lin, self.ang_b)]
     }
 
@@ -324,7 +323,8 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
     let friction = std::mem::take(&mut r.contact_friction);
     for &(k, first) in &merged.into {
         r.contact_force.push(if first { force[k] } else { 0.0 });
-        r.contact_friction.push(if first { friction[k] } else { Vector3::zeros() });
+        r.contact_friction
+            .push(if first { friction[k] } else { Vector3::zeros() });
     }
     r
 }
@@ -1531,7 +1531,10 @@ mod tests {
     fn solve_stats_report_system_sizes_and_sweeps() {
         let r = solve_island(&resting_stack_task(320, ITERATIVE_MIN_ROWS as u32));
         let s = &r.stats;
-        assert_eq!((s.lcp_solves, s.iterative_solves, s.iterative_unconverged), (0, 1, 0));
+        assert_eq!(
+            (s.lcp_solves, s.iterative_solves, s.iterative_unconverged),
+            (0, 1, 0)
+        );
         assert_eq!((s.largest_rows, s.large_systems), (320, 1));
         assert!(s.iterative_sweeps > 0 && s.iterative_sweeps < ITERATIVE_SWEEPS as u64);
         // The compliance (`ITERATIVE_COMPLIANCE`) costs a chain this long
@@ -1543,7 +1546,10 @@ mod tests {
 
         let r = solve_island(&resting_stack_task(40, ITERATIVE_MIN_ROWS as u32));
         let s = &r.stats;
-        assert_eq!((s.lcp_solves, s.iterative_solves, s.iterative_sweeps), (1, 0, 0));
+        assert_eq!(
+            (s.lcp_solves, s.iterative_solves, s.iterative_sweeps),
+            (1, 0, 0)
+        );
         assert_eq!((s.largest_rows, s.large_systems), (40, 0));
         let mut all = SolveStats::default();
         all.add(&solve_island(&resting_stack_task(320, 300)).stats);
@@ -1564,10 +1570,16 @@ mod tests {
             .map(|c| Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal))
             .collect();
         let m = rows.len();
-        let v: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.velocity + b.external_dv).collect();
+        let v: Vec<Vector3<f64>> = task
+            .bodies
+            .iter()
+            .map(|b| b.velocity + b.external_dv)
+            .collect();
         let w = vec![Vector3::zeros(); task.bodies.len()];
         let b: Vec<f64> = rows.iter().map(|r| r.velocity(&v, &w)).collect();
-        let a: Vec<f64> = (0..m * m).map(|k| rows[k / m].coupling(&rows[k % m])).collect();
+        let a: Vec<f64> = (0..m * m)
+            .map(|k| rows[k / m].coupling(&rows[k % m]))
+            .collect();
         let body: Vec<[u32; 2]> = rows.iter().map(|r| [r.a as u32, r.b as u32]).collect();
         let jacobian: Vec<_> = rows.iter().map(Row::jacobian).collect();
         let response: Vec<_> = rows.iter().map(Row::response).collect();
@@ -1586,7 +1598,10 @@ mod tests {
             assert!((x - y).abs() <= 1e-12 * load, "{x} against {y}");
         }
         let wrong = [[0u32, 99]; 80];
-        let bad = lcp::RowFactors { body: &wrong, ..factors };
+        let bad = lcp::RowFactors {
+            body: &wrong,
+            ..factors
+        };
         assert!(matches!(
             lcp::solve(&lcp::LcpProblem::standard(&a, &b).with_factors(bad)),
             Err(lcp::LcpError::InvalidInput { .. })
@@ -1657,7 +1672,10 @@ mod tests {
         let merged = solve_island(&twice);
         let unmerged = solve_distinct(&twice);
         let by_hand = solve_distinct(&once);
-        assert_eq!(merged.stats.rows, 12, "four contacts of three rows, one phase");
+        assert_eq!(
+            merged.stats.rows, 12,
+            "four contacts of three rows, one phase"
+        );
         assert_eq!(unmerged.stats.rows, 24);
         assert_eq!(merged.force, by_hand.force);
         assert_eq!(merged.torque, by_hand.torque);
