@@ -297,6 +297,32 @@ impl Row {
     }
 }
 
+/// The storage behind `lcp::RowFactors` for a list of rows.
+struct RowFactorsOf {
+    body: Vec<[u32; 2]>,
+    jacobian: Vec<[[f64; 6]; 2]>,
+    response: Vec<[[f64; 6]; 2]>,
+}
+
+impl RowFactorsOf {
+    fn new(rows: &[Row]) -> Self {
+        RowFactorsOf {
+            body: rows.iter().map(|r| [r.a as u32, r.b as u32]).collect(),
+            jacobian: rows.iter().map(Row::jacobian).collect(),
+            response: rows.iter().map(Row::response).collect(),
+        }
+    }
+
+    fn view(&self, bodies: usize) -> lcp::RowFactors<'_> {
+        lcp::RowFactors {
+            bodies,
+            body: &self.body,
+            jacobian: &self.jacobian,
+            response: &self.response,
+        }
+    }
+}
+
 /// Which velocities a solve targets.
 #[derive(Clone, Copy)]
 enum Phase<'a> {
@@ -365,10 +391,9 @@ fn merge_coincident_contacts(task: &IslandTask) -> Option<MergedIsland> {
         {
             pair_start = contacts.len();
         }
+        // contacts[pair_start..] are this pair's.
         let copy_of = contacts[pair_start..].iter().position(|k| {
-            (k.a, k.b) == (c.a, c.b)
-                && (k.point - c.point).norm() <= COINCIDENT
-                && (k.normal - c.normal).norm() <= COINCIDENT
+            (k.point - c.point).norm() <= COINCIDENT && (k.normal - c.normal).norm() <= COINCIDENT
         });
         match copy_of {
             Some(k) => {
@@ -699,21 +724,14 @@ fn solve_phase(
     stats.lcp_solves += 1;
     // A's factors, so that Dantzig's drive updates w in O(rows) a pivot,
     // from `FACTORED_MIN_ROWS` rows.
-    let body: Vec<[u32; 2]> = rows.iter().map(|r| [r.a as u32, r.b as u32]).collect();
-    let jacobian: Vec<[[f64; 6]; 2]> = rows.iter().map(Row::jacobian).collect();
-    let response: Vec<[[f64; 6]; 2]> = rows.iter().map(Row::response).collect();
+    let factors = (m >= FACTORED_MIN_ROWS).then(|| RowFactorsOf::new(&rows));
     let problem = lcp::LcpProblem {
         a: &a,
         b: &rhs,
         lo: &lo,
         hi: &hi,
         findex: &findex,
-        factors: (m >= FACTORED_MIN_ROWS).then_some(lcp::RowFactors {
-            bodies: v.len(),
-            body: &body,
-            jacobian: &jacobian,
-            response: &response,
-        }),
+        factors: factors.as_ref().map(|f| f.view(v.len())),
     };
     // One workspace per thread: no allocation per solve once warmed up.
     thread_local! {
@@ -1366,6 +1384,20 @@ pub fn projected_gauss_seidel(
 mod tests {
     use super::*;
 
+    /// A fixed body (no inverse mass or inertia) at rest at `position`.
+    fn fixed_body(position: Vector3<f64>) -> IslandBody {
+        IslandBody {
+            id: BodyId(0),
+            inv_mass: 0.0,
+            inv_inertia: Matrix3::zeros(),
+            position,
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+            external_dv: Vector3::zeros(),
+            external_dw: Vector3::zeros(),
+        }
+    }
+
     /// A frictionless stack of `n` 1 kg bodies on a fixed floor in the
     /// resting phase (every body about to fall g·h), solved by sequential
     /// impulses from `warm` (a share of the exact answer). Returns the
@@ -1373,16 +1405,7 @@ mod tests {
     /// impulse under the k-th body from the top is k·m·g·h.
     fn stack(n: usize, warm: f64) -> (Vec<f64>, bool, Vec<f64>, Vec<f64>) {
         let (g, h) = (9.81, 0.01);
-        let mut bodies = vec![IslandBody {
-            id: BodyId(0),
-            inv_mass: 0.0,
-            inv_inertia: Matrix3::zeros(),
-            position: Vector3::zeros(),
-            velocity: Vector3::zeros(),
-            angular_velocity: Vector3::zeros(),
-            external_dv: Vector3::zeros(),
-            external_dw: Vector3::zeros(),
-        }];
+        let mut bodies = vec![fixed_body(Vector3::zeros())];
         for k in 1..=n {
             bodies.push(IslandBody {
                 id: BodyId(k as u32),
@@ -1478,16 +1501,7 @@ mod tests {
     /// A frictionless stack of `n` 1 kg bodies at rest on a fixed floor, as
     /// an island task (resting phase only: nothing approaches).
     fn resting_stack_task(n: usize, iterative_min_rows: u32) -> IslandTask {
-        let floor = IslandBody {
-            id: BodyId(0),
-            inv_mass: 0.0,
-            inv_inertia: Matrix3::zeros(),
-            position: Vector3::zeros(),
-            velocity: Vector3::zeros(),
-            angular_velocity: Vector3::zeros(),
-            external_dv: Vector3::zeros(),
-            external_dw: Vector3::zeros(),
-        };
+        let floor = fixed_body(Vector3::zeros());
         let mut bodies = vec![floor.clone()];
         for k in 1..=n {
             bodies.push(IslandBody {
@@ -1580,15 +1594,8 @@ mod tests {
         let a: Vec<f64> = (0..m * m)
             .map(|k| rows[k / m].coupling(&rows[k % m]))
             .collect();
-        let body: Vec<[u32; 2]> = rows.iter().map(|r| [r.a as u32, r.b as u32]).collect();
-        let jacobian: Vec<_> = rows.iter().map(Row::jacobian).collect();
-        let response: Vec<_> = rows.iter().map(Row::response).collect();
-        let factors = lcp::RowFactors {
-            bodies: task.bodies.len(),
-            body: &body,
-            jacobian: &jacobian,
-            response: &response,
-        };
+        let storage = RowFactorsOf::new(&rows);
+        let factors = storage.view(task.bodies.len());
         let dense = lcp::solve_standard(&a, &b).expect("the dense solve");
         let factored = lcp::solve(&lcp::LcpProblem::standard(&a, &b).with_factors(factors))
             .expect("the factored solve");
@@ -1616,16 +1623,7 @@ mod tests {
     /// deeper separation deciding, and each copy's force on its first.
     #[test]
     fn coincident_contacts_are_one_row() {
-        let floor = IslandBody {
-            id: BodyId(0),
-            inv_mass: 0.0,
-            inv_inertia: Matrix3::zeros(),
-            position: Vector3::new(0.0, 0.0, -1.0),
-            velocity: Vector3::zeros(),
-            angular_velocity: Vector3::zeros(),
-            external_dv: Vector3::zeros(),
-            external_dw: Vector3::zeros(),
-        };
+        let floor = fixed_body(Vector3::new(0.0, 0.0, -1.0));
         let cube = IslandBody {
             id: BodyId(1),
             inv_mass: 1.0,
@@ -1766,16 +1764,7 @@ mod tests {
             let local =
                 Matrix3::from_diagonal(&Vector3::new(1.0 / axial, 1.0 / across, 1.0 / across));
             let inv_inertia = rot.matrix() * local * rot.matrix().transpose();
-            let floor = IslandBody {
-                id: BodyId(0),
-                inv_mass: 0.0,
-                inv_inertia: Matrix3::zeros(),
-                position: Vector3::new(0.0, 0.0, -0.1),
-                velocity: Vector3::zeros(),
-                angular_velocity: Vector3::zeros(),
-                external_dv: Vector3::zeros(),
-                external_dw: Vector3::zeros(),
-            };
+            let floor = fixed_body(Vector3::new(0.0, 0.0, -0.1));
             let body = IslandBody {
                 id: BodyId(1),
                 inv_mass: 1.0 / m,
