@@ -7,29 +7,14 @@
 //! where MPI cannot start).
 
 use serde_json::Value;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 /// Exported coordinates, transformed, against the scene file's (m).
 const PLACEMENT_TOL: f64 = 1e-12;
 
-fn bundled(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scenes")
-        .join(name)
-}
-
-/// The binary run directly, without mpirun. `run` initialises MPI even
-/// alone, and Open MPI refuses root without these two variables.
-fn rigidsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rigidsim"))
-        .args(args)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .stdin(Stdio::null())
-        .output()
-        .expect("cannot start rigidsim")
-}
+mod common;
+use common::{bundled, rigidsim};
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -9,30 +9,17 @@
 use base64::Engine;
 use serde_json::Value;
 use std::io::{BufRead, Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 /// Energies recomputed from the trajectory against `summary.json`'s (J,
 /// relative): the same terms, ω instead of L, so rounding only.
 const ENERGY_TOL: f64 = 1e-9;
 
-fn bundled(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scenes")
-        .join(name)
-}
-
-/// Open MPI refuses root without these, even for `run` alone; `view`
-/// must not need them, so `view` calls go through `rigidsim_bare`.
-fn rigidsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rigidsim"))
-        .args(args)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .stdin(Stdio::null())
-        .output()
-        .expect("cannot start rigidsim")
-}
+mod common;
+// `common::rigidsim` sets Open MPI's root variables, even for `run` alone;
+// `view` must not need them, so `view` calls go through `rigidsim_bare`.
+use common::{bundled, rigidsim};
 
 /// A component Open MPI cannot load: `run` fails to start MPI under it.
 const BREAK_MPI: (&str, &str) = ("OMPI_MCA_pml", "no_such_pml");

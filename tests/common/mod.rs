@@ -1,10 +1,12 @@
-//! Shared helpers for the physics tests: scenes from TOML text, stepping.
+//! Shared helpers for the tests: scenes from TOML text, stepping, the
+//! bundled scenes and the binary run directly.
 #![allow(dead_code)]
 
 use rigidsim::contact::lcp::{LcpProblem, LcpSolution};
 use rigidsim::scene;
 use rigidsim::step::{Inline, World};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
 
 pub fn world(toml: &str) -> World {
     let scene = scene::from_str(toml, Path::new("test.toml"), Path::new("."))
@@ -76,4 +78,24 @@ pub fn lcp_violation(p: &LcpProblem, sol: &LcpSolution) -> Result<f64, String> {
         }
     }
     Ok(worst)
+}
+
+/// A scene of `scenes/`.
+pub fn bundled(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(name)
+}
+
+/// The binary run directly, without mpirun, no standard input. `run`
+/// initialises MPI even alone, and Open MPI refuses root without these two
+/// variables.
+pub fn rigidsim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rigidsim"))
+        .args(args)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .stdin(Stdio::null())
+        .output()
+        .expect("cannot start rigidsim")
 }
