@@ -401,17 +401,6 @@ impl<'w> MpiExecutor<'w> {
         self.workers_for_stage(Stage::Narrowphase, estimated_s, tasks, COORDINATOR_SHARE)
     }
 
-    fn workers_for_share(&self, estimated_s: f64, tasks: usize, share: f64) -> usize {
-        let workers = self.roles.workers.len();
-        if workers == 0 || tasks < 2 {
-            return 0;
-        }
-        if self.force_distribute {
-            return workers;
-        }
-        schedule::workers_to_use(estimated_s, &self.speeds, share, self.latency_s)
-    }
-
     /// Splits tasks by the greedy rule over rank 0 and the `k` fastest
     /// workers; returns per slot the task indices.
     fn plan(&self, costs: &[f64], k: usize, share: f64) -> Vec<Vec<usize>> {
@@ -1127,11 +1116,16 @@ impl MpiExecutor<'_> {
         }
     }
 
-    /// `workers_for_share`, with the time the stage's bytes take on the
-    /// link (`schedule::workers_to_use_over_link`).
+    /// Workers a stage of this estimated cost should use, rank 0 counted at
+    /// `share` of its speed, with the time the stage's bytes take on the
+    /// link (`schedule::workers_to_use_over_link`). `--force-distribute`
+    /// uses them all; fewer than two tasks stay on rank 0.
     fn workers_for_stage(&self, stage: Stage, estimated_s: f64, tasks: usize, share: f64) -> usize {
-        let workers = self.workers_for_share(estimated_s, tasks, share);
-        if workers == 0 || self.force_distribute {
+        let workers = self.roles.workers.len();
+        if workers == 0 || tasks < 2 {
+            return 0;
+        }
+        if self.force_distribute {
             return workers;
         }
         schedule::workers_to_use_over_link(
