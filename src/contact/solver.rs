@@ -66,7 +66,7 @@ pub struct IslandContact {
     pub separation: f64,
     /// The resting force this contact held in the last solve of its pair
     /// (normal, newtons, and friction, world frame), zero if none: the start
-    /// of the iterative solve (warm start; Dantzig's method does not use it).
+    /// of the iterative solve and of Dantzig's method (warm start).
     pub warm_force: f64,
     pub warm_friction: Vector3<f64>,
     /// How the normal turns with the bodies (for `gap_curvature`).
@@ -167,6 +167,10 @@ pub struct SolveStats {
     pub largest_rows: u32,
     /// Systems of `LARGE_SYSTEM_ROWS` rows or more.
     pub large_systems: u32,
+    /// The most any applied answer missed its system's LCP conditions by
+    /// (m/s, `violation`): an exact answer's rounding, or what an iterative
+    /// one left (`iterative_unconverged`), or a failed solve's fallback.
+    pub worst_violation: f64,
 }
 
 /// Rows from which a system counts in `SolveStats::large_systems`: where
@@ -202,6 +206,7 @@ impl SolveStats {
         self.iterative_sweeps += o.iterative_sweeps;
         self.largest_rows = self.largest_rows.max(o.largest_rows);
         self.large_systems += o.large_systems;
+        self.worst_violation = self.worst_violation.max(o.worst_violation);
     }
 }
 
@@ -709,6 +714,7 @@ fn solve_phase(
         }
         if met || m >= DANTZIG_MAX_ROWS {
             let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
+            note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
             let sum = normal_sum(&p);
             return (rows, p, sum);
         }
@@ -725,6 +731,20 @@ fn solve_phase(
     // A's factors, so that Dantzig's drive updates w in O(rows) a pivot,
     // from `FACTORED_MIN_ROWS` rows.
     let factors = (m >= FACTORED_MIN_ROWS).then(|| RowFactorsOf::new(&rows));
+    // Dantzig's method starts from the iterative answer that missed the
+    // conditions, else from the last step's impulses where there are any:
+    // the sets they imply are most of the answer's (`lcp::LcpProblem::start`).
+    // From `FACTORED_MIN_ROWS` rows, like the factors: below, the small
+    // exact cases keep the rounding of a fresh start.
+    let warm_started = m >= FACTORED_MIN_ROWS;
+    let start = unconverged
+        .clone()
+        .or_else(|| warm.iter().any(|&x| x != 0.0).then(|| warm.clone()))
+        .filter(|_| warm_started);
+    let options = lcp::LcpOptions {
+        resume_passes: warm_started,
+        ..Default::default()
+    };
     let problem = lcp::LcpProblem {
         a: &a,
         b: &rhs,
@@ -732,6 +752,7 @@ fn solve_phase(
         hi: &hi,
         findex: &findex,
         factors: factors.as_ref().map(|f| f.view(v.len())),
+        start: start.as_deref(),
     };
     // One workspace per thread: no allocation per solve once warmed up.
     thread_local! {
@@ -741,7 +762,7 @@ fn solve_phase(
         let problem = lcp::LcpProblem { a, ..problem };
         WORKSPACE.with(|ws| ws.borrow_mut().solve(&problem, options))
     };
-    let p = match solve(&a, &lcp::LcpOptions::default()) {
+    let p = match solve(&a, &options) {
         Ok(sol) => {
             stats.pivots += sol.pivots as u64;
             sol.x
@@ -753,7 +774,7 @@ fn solve_phase(
         // row too, and on the 800 rows of a stack of 50 one retry took
         // seconds, where Gauss-Seidel takes milliseconds.
         Err(e) => match (m <= COMPLIANT_RETRY_ROWS)
-            .then(|| solve(&compliant(&a, m), &lcp::LcpOptions::default()))
+            .then(|| solve(&compliant(&a, m), &options))
             .unwrap_or_else(|| Err(e.clone()))
         {
             Ok(sol) => {
@@ -787,8 +808,72 @@ fn solve_phase(
     let p = energy_guard(&diag, &rows, (v, w, &bias), p, stats, |vel| {
         safe_answers(&a, m, vel, &lo, &hi, &findex, &restitution)
     });
+    note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
     let sum = normal_sum(&p);
     (rows, p, sum)
+}
+
+/// Records in `stats.worst_violation` how far `p` misses the LCP
+/// conditions of its system (`violation`).
+#[allow(clippy::too_many_arguments)]
+fn note_violation(
+    rows: &[Row],
+    b: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    findex: &[Option<usize>],
+    p: &[f64],
+    bodies: usize,
+    stats: &mut SolveStats,
+) {
+    let v = violation(rows, b, lo, hi, findex, p, bodies);
+    stats.worst_violation = stats.worst_violation.max(v);
+}
+
+/// How far impulses `p` miss the conditions of the system w = A p + b
+/// (friction bounds ±μ times the normal row's impulse), in m/s: per row,
+/// the velocity on the side its bound does not allow (w < 0 at a lower
+/// bound, w > 0 at an upper one), and between its bounds the smaller of
+/// |w| and the velocity change A_ii·(p − bound) that would take it to the
+/// bound where its w is allowed (a friction row whose normal impulse is
+/// 1e-13 has bounds that close: it may slip); a bound overstepped counts
+/// times A_ii. Computed through the bodies' velocity change, independent of
+/// the method that found p. Zero for an exact answer up to rounding.
+pub(super) fn violation(
+    rows: &[Row],
+    b: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    findex: &[Option<usize>],
+    p: &[f64],
+    bodies: usize,
+) -> f64 {
+    let (mut dv, mut dw) = (
+        vec![Vector3::zeros(); bodies],
+        vec![Vector3::zeros(); bodies],
+    );
+    for (row, &pi) in rows.iter().zip(p) {
+        row.change_velocities(pi, &mut dv, &mut dw);
+    }
+    let mut worst = 0.0f64;
+    for (i, row) in rows.iter().enumerate() {
+        let (l, h) = match findex[i] {
+            None => (lo[i], hi[i]),
+            Some(j) => (lo[i] * p[j].abs(), hi[i] * p[j].abs()),
+        };
+        let w = b[i] + row.velocity(&dv, &dw);
+        let a_ii = row.coupling(row);
+        let side = match (p[i] <= l, p[i] >= h) {
+            (true, true) => 0.0,
+            (true, false) => (-w).max(0.0),
+            (false, true) => w.max(0.0),
+            (false, false) if w > 0.0 => w.min(a_ii * (p[i] - l)),
+            (false, false) => (-w).min(a_ii * (h - p[i])),
+        };
+        let outside = (l - p[i]).max(p[i] - h).max(0.0) * a_ii;
+        worst = worst.max(side).max(outside);
+    }
+    worst
 }
 
 /// Answers to a contact system that add no energy, for the energy guard,
@@ -823,6 +908,7 @@ fn safe_answers(
         hi,
         findex,
         factors: None,
+        start: None,
     };
     if let Ok(sol) = lcp::solve(&inelastic) {
         if restitution.iter().any(|&e| e > 0.0) {
