@@ -79,6 +79,13 @@ struct RunArgs {
     /// Test aid: make rank R take F times longer per task, e.g. --slow-rank 2=3.0.
     #[arg(long, value_parser = parse_slow)]
     slow_rank: Vec<(i32, f64)>,
+    /// Test aid: write every contact island of --capture-min-rows rows or
+    /// more to DIR, one file each (the solver's fixtures and benchmark).
+    #[arg(long, value_name = "DIR")]
+    capture_islands: Option<PathBuf>,
+    /// Smallest island (LCP rows) --capture-islands writes.
+    #[arg(long, value_name = "ROWS", default_value_t = 60)]
+    capture_min_rows: usize,
     /// Distribute every stage whatever its size (tests of determinism and balance).
     #[arg(long)]
     force_distribute: bool,
@@ -256,6 +263,12 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         world.process_at_rank(0).broadcast_into(&mut code);
         if code != 0 {
             return ExitCode::from(code as u8);
+        }
+    }
+    if let Some(dir) = &cli.capture_islands {
+        if let Err(e) = rigidsim::output::capture::start(dir.clone(), cli.capture_min_rows, rank) {
+            say(&format!("error: --capture-islands {}: {e}", dir.display()));
+            return ExitCode::from(2);
         }
     }
     let roles = Roles::new(size, scene.settings.render.is_some());

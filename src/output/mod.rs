@@ -3,6 +3,7 @@
 //! (rendering) `frames/`, `video.mp4`, `preview.png`.
 //! Names, columns and fields here are a contract with other tools.
 
+pub mod capture;
 pub mod checkpoint;
 pub mod progress;
 pub mod summary;

@@ -265,6 +265,7 @@ impl Region<'_> {
         self.stage.build_islands += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
+        crate::output::capture::islands(&tasks);
         let results = exec.solve_islands(tasks);
         let mut pair_forces: BTreeMap<(BodyId, BodyId), f64> = Default::default();
         for (pairs, r) in contact_pairs.iter().zip(&results) {

@@ -1,0 +1,210 @@
+//! The contact solver on real islands (`tests/data/islands/`, written by
+//! `--capture-islands` from the 1000-body pour between 1.2 and 1.3 s, and
+//! from the stacks of 50 and 100 and the pyramid of `scripts/stress.sh`):
+//! every answer is checked against its systems' LCP conditions
+//! (`SolveStats::worst_violation`, computed from the rows whatever method
+//! answered), the pyramid's iterative answer against Dantzig's, and the
+//! work each solve takes against a cap, so that a regression shows. Work is
+//! counted in pivots and sweeps, which are deterministic (no timing).
+
+mod common;
+
+use rigidsim::contact::solver::{IslandResult, IslandTask, SolveStats, solve_island};
+use std::path::Path;
+
+fn fixture(name: &str) -> IslandTask {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/islands")
+        .join(format!("{name}.bin"));
+    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    bincode::serde::decode_from_slice(&bytes, bincode::config::standard())
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .0
+}
+
+fn describe(name: &str, s: &SolveStats) -> String {
+    format!(
+        "{name}: rows {}, violation {:.2e} m/s, pivots {}, sweeps {}, Dantzig solves {}, \
+         iterative {} ({} unconverged), compliant {}, failed {}",
+        s.largest_rows,
+        s.worst_violation,
+        s.pivots,
+        s.iterative_sweeps,
+        s.lcp_solves,
+        s.iterative_solves,
+        s.iterative_unconverged,
+        s.compliant_solves,
+        s.failed
+    )
+}
+
+/// How far an answer may miss its conditions: the iterative solve's
+/// tolerance (1e-8 m/s at these speeds, `ITERATIVE_FLOOR`), met on the
+/// slightly compliant system, plus what that compliance (1e-9 of the
+/// diagonal) makes the exact system's rows close at under the stacks'
+/// loads (1e-8 m/s at the bottom of the stack of 100), which the
+/// compliant retry of Dantzig's method (`COMPLIANCE`) stays within too.
+const TOLERANCE: f64 = 2e-8;
+
+/// Islands solved to the LCP's conditions, with the work they took when
+/// this test was written: a pivot or sweep count over 1.5× that fails.
+/// (name, rows, pivots, sweeps)
+const SOLVED: [(&str, u32, u64, u64); 7] = [
+    // Dantzig's method, exact.
+    ("pile_96rows", 96, 145, 0),
+    // Dantzig's method, the exact system failed: the compliant one.
+    ("pile_99rows_compliant", 99, 976, 0),
+    ("pile_246rows_compliant", 246, 4072, 0),
+    // Sequential impulses missed the conditions; Dantzig's method from
+    // their answer (`LcpProblem::start`).
+    ("pile_354rows_iterative_then_dantzig", 354, 1413, 1072),
+    // Sequential impulses with the subspace step.
+    ("stack50", 600, 0, 16),
+    ("stack100", 1206, 0, 8),
+    ("pyramid", 312, 0, 8),
+];
+
+#[test]
+fn captured_islands_meet_the_lcp_conditions_within_their_work() {
+    for (name, rows, pivots, sweeps) in SOLVED {
+        let r: IslandResult = solve_island(&fixture(name));
+        let s = &r.stats;
+        let seen = describe(name, s);
+        eprintln!("[islands] {seen}");
+        assert_eq!(s.largest_rows, rows, "{seen}");
+        assert_eq!(s.failed, 0, "{seen}");
+        assert!(s.worst_violation <= TOLERANCE, "{seen}");
+        assert!(
+            s.pivots as f64 <= 1.5 * pivots as f64,
+            "{seen}: over 1.5 × {pivots} pivots"
+        );
+        assert!(
+            s.iterative_sweeps as f64 <= 1.5 * sweeps as f64,
+            "{seen}: over 1.5 × {sweeps} sweeps"
+        );
+    }
+}
+
+/// The limits of today's solver, kept as they are so that they show when
+/// they move (docs/architecture.md, *Known limits*): a settling pile's
+/// island of 597 rows, above `DANTZIG_MAX_ROWS`, whose sequential impulses
+/// stop at the sweep cap 5.5e-5 m/s short of the conditions (the answer is
+/// kept); and one of 108 rows on which Dantzig's method fails on the exact
+/// and the compliant system and the sequential impulses miss too, so the
+/// fallback answers, 1.4e-2 m/s off. Either getting worse fails here.
+#[test]
+fn the_known_misses_stay_where_they_are() {
+    let r = solve_island(&fixture("pile_597rows_iterative_unconverged"));
+    let seen = describe("pile_597rows_iterative_unconverged", &r.stats);
+    eprintln!("[islands] {seen}");
+    assert_eq!(r.stats.iterative_unconverged, 1, "{seen}");
+    assert!(r.stats.worst_violation <= 1e-4, "{seen}");
+
+    let r = solve_island(&fixture("pile_108rows_failed"));
+    let seen = describe("pile_108rows_failed", &r.stats);
+    eprintln!("[islands] {seen}");
+    assert!(r.stats.failed <= 1, "{seen}");
+    assert!(r.stats.worst_violation <= 2e-2, "{seen}");
+}
+
+/// The pyramid's island solved by sequential impulses and by Dantzig's
+/// method (`iterative_min_rows` past its rows): both meet the conditions,
+/// and every body ends the step with the same velocity change to 1e-8 m/s
+/// and rad/s (9e-10 when written). (The impulses themselves are not unique: a cube on two
+/// cubes below may rest on either more.)
+#[test]
+fn the_pyramid_answers_alike_by_both_methods() {
+    let task = fixture("pyramid");
+    let iterative = solve_island(&task);
+    let exact = solve_island(&IslandTask {
+        iterative_min_rows: u32::MAX,
+        ..task.clone()
+    });
+    for (name, r) in [("iterative", &iterative), ("Dantzig", &exact)] {
+        let seen = describe(name, &r.stats);
+        eprintln!("[islands] pyramid, {seen}");
+        assert!(r.stats.worst_violation <= TOLERANCE, "{seen}");
+    }
+    assert!(iterative.stats.iterative_solves > 0 && exact.stats.iterative_solves == 0);
+    let mut worst: f64 = 0.0;
+    for (k, body) in task.bodies.iter().enumerate() {
+        let change = |r: &IslandResult| {
+            let dv = (r.impulse[k] + r.force[k] * task.dt) * body.inv_mass;
+            let dw = body.inv_inertia * (r.angular_impulse[k] + r.torque[k] * task.dt);
+            (dv, dw)
+        };
+        let ((v1, w1), (v2, w2)) = (change(&iterative), change(&exact));
+        worst = worst.max((v1 - v2).norm()).max((w1 - w2).norm());
+    }
+    eprintln!("[islands] pyramid: largest difference in a body's velocity change {worst:.2e}");
+    assert!(worst <= 1e-8, "{worst:e}");
+}
+
+/// `--capture-islands` writes the islands a run solves and leaves the run
+/// as it was: the resting stack's islands (down to one row) decode as
+/// tasks that solve, the file names carry their rows, and the state hash
+/// is the one of the same run without capturing.
+#[test]
+fn capture_writes_islands_and_changes_nothing() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("islands");
+    let scene = common::bundled("resting_stack.toml");
+    let run = |out: &str, capture: bool| {
+        let out = root.path().join(out);
+        let mut args = vec![
+            scene.to_str().unwrap().to_string(),
+            "--duration".into(),
+            "0.1".into(),
+            "--no-render".into(),
+            "--no-progress".into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+        ];
+        if capture {
+            args.extend([
+                "--capture-islands".into(),
+                dir.to_str().unwrap().into(),
+                "--capture-min-rows".into(),
+                "1".into(),
+            ]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = common::rigidsim(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        summary["state_hash"].clone()
+    };
+    let plain = run("plain", false);
+    let captured = run("captured", true);
+    assert_eq!(plain, captured, "capturing changed the run");
+    let files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(!files.is_empty(), "nothing captured");
+    for path in files {
+        let bytes = std::fs::read(&path).unwrap();
+        let task: IslandTask =
+            bincode::serde::decode_from_slice(&bytes, bincode::config::standard())
+                .unwrap()
+                .0;
+        let rows: usize = task
+            .contacts
+            .iter()
+            .map(|c| if c.friction > 0.0 { 3 } else { 1 })
+            .sum();
+        let name = path.file_name().unwrap().to_str().unwrap();
+        assert!(
+            name.ends_with(&format!("_{rows}rows.bin")),
+            "{name}: {rows} rows"
+        );
+        let r = solve_island(&task);
+        assert_eq!(r.impulse.len(), task.bodies.len());
+        assert!(
+            r.stats.worst_violation <= TOLERANCE,
+            "{name}: {:e}",
+            r.stats.worst_violation
+        );
+    }
+}
