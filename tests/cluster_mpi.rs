@@ -652,7 +652,10 @@ fn slowed_rank_gets_work_in_proportion_to_its_speed() {
     // 60 bodies 0.32–0.50 in 28 runs, at 100 0.34–0.44 in 8).
     let nuts = root.path().join("nuts_and_bolts_100.toml");
     let bundled = std::fs::read_to_string(scene("nuts_and_bolts.toml")).unwrap();
-    assert!(bundled.contains("\ncount = 20\n"), "the bundled pour's count moved");
+    assert!(
+        bundled.contains("\ncount = 20\n"),
+        "the bundled pour's count moved"
+    );
     std::fs::write(&nuts, bundled.replace("\ncount = 20\n", "\ncount = 100\n")).unwrap();
     // 2 s: enough distributed frames for the smoothed speeds to settle on
     // 2 shared cores (with 1 s, one run in four fell out of the band).
