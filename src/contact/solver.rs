@@ -167,9 +167,12 @@ pub struct SolveStats {
     pub largest_rows: u32,
     /// Systems of `LARGE_SYSTEM_ROWS` rows or more.
     pub large_systems: u32,
-    /// The most any applied answer missed its system's LCP conditions by
-    /// (m/s, `violation`): an exact answer's rounding, or what an iterative
-    /// one left (`iterative_unconverged`), or a failed solve's fallback.
+    /// The most any answer missed its system's LCP conditions by (m/s,
+    /// `violation`): an exact answer's rounding, what an iterative one left
+    /// (`iterative_unconverged`), or a failed solve's fallback. Measured
+    /// before the energy guard: an answer it replaces is counted in
+    /// `failed`, and the safe answer it applies instead (no restitution, or
+    /// no friction) meets another system's conditions on purpose.
     pub worst_violation: f64,
 }
 
@@ -713,8 +716,8 @@ fn solve_phase(
             stats.iterative_unconverged += 1;
         }
         if met || m >= DANTZIG_MAX_ROWS {
-            let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
             note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
+            let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
             let sum = normal_sum(&p);
             return (rows, p, sum);
         }
@@ -805,10 +808,10 @@ fn solve_phase(
             },
         },
     };
+    note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
     let p = energy_guard(&diag, &rows, (v, w, &bias), p, stats, |vel| {
         safe_answers(&a, m, vel, &lo, &hi, &findex, &restitution)
     });
-    note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
     let sum = normal_sum(&p);
     (rows, p, sum)
 }
