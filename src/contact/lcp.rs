@@ -148,7 +148,23 @@
 //!    bounds frozen at the values of the last x (averaged with the previous
 //!    pass's from the third pass on, which breaks the two-cycles that coplanar
 //!    contacts cause), then step 1 again, up to
-//!    [`LcpOptions::max_friction_passes`].
+//!    [`LcpOptions::max_friction_passes`]. With
+//!    [`LcpOptions::resume_passes`] (the default) such a pass starts from the
+//!    last pass's sets rather than from nothing (`resume_pass`): x_C is
+//!    solved anew for the new bounds, the rows that then miss their
+//!    condition go back to unprocessed, and only those are driven.
+//!
+//! # Starting from a guess
+//!
+//! [`LcpProblem::start`] (e.g. the last step's impulses of the same
+//! contacts) makes the first pass start from the sets the guess implies:
+//! friction bounds frozen at μ times the guess's normal impulses, each row
+//! at the bound the guess puts it on, the rows inside their bounds clamped
+//! where independent of those clamped before (`start_pass`), then as a
+//! resumed pass. Every processed row meets its condition before the drive
+//! starts, as the method needs, so the answer is one of Dantzig's and is
+//! verified the same way; where the guess's sets do not settle in
+//! `RESUME_ROUNDS` rounds, the pass starts from nothing after all.
 //!
 //! On 3000 random stacks of 1–4 boxes with 4 corner contacts each (12–48 rows,
 //! mu 0.1–1), 21 % finish in one pass, the mean is 3 passes, and 3 (0.1 %) find no
