@@ -7,7 +7,10 @@
 //! solves there (see `step::capture`); `tests/data/islands/` holds a few.
 //!
 //! Run: `cargo bench --bench islands -- [DIR]` (default `tests/data/islands`);
-//! prints a line per size class and the totals.
+//! prints a line per size class and the totals. With `ISLANDS_CSV=1`, also
+//! a line per island on stderr: `csv,contacts,rows,seconds,iterative
+//! solves,unconverged,sweeps,lcp solves,pivots,compliant,failed,worst
+//! violation` (the island's two solves, impact and resting, together).
 
 use std::time::Instant;
 
@@ -58,6 +61,22 @@ fn main() {
             .unwrap();
         seconds[k] += s;
         count[k] += 1;
+        if std::env::var_os("ISLANDS_CSV").is_some() {
+            let st = &r.stats;
+            eprintln!(
+                "csv,{},{},{s:.6},{},{},{},{},{},{},{},{:.3e}",
+                task.contacts.len(),
+                st.largest_rows,
+                st.iterative_solves,
+                st.iterative_unconverged,
+                st.iterative_sweeps,
+                st.lcp_solves,
+                st.pivots,
+                st.compliant_solves,
+                st.failed,
+                st.worst_violation
+            );
+        }
         missed += usize::from(r.stats.worst_violation > 1e-8);
         total.add(&r.stats);
     }
