@@ -414,7 +414,7 @@ const RAY_FRACTION: f64 = 0.1;
 /// the settling 1000-body pile (1.2-1.3 s), 4 rounds often fell short and
 /// each restart cost a whole fresh pass (708 k pivots in all); with 16
 /// every start and resume settled (the same 322 k pivots with 16, 32 or
-/// 64), 15.5 s -> 11.4-12.0 s of solves.
+/// 64), 17.0 s -> 12.6 s of solves (medians of 3, interleaved).
 const RESUME_ROUNDS: usize = 16;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
