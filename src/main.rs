@@ -306,7 +306,8 @@ fn run_scene(cli: RunArgs) -> ExitCode {
     let frames: &mut dyn FrameSink = match (scene.settings.render.is_some(), roles.renderer) {
         (false, _) => &mut no_frames,
         (true, Some(r)) => {
-            remote = RemoteFrames::new(&world, r);
+            let host = hosts.get(r as usize).cloned().unwrap_or_else(|| "?".into());
+            remote = RemoteFrames::new(&world, r, host);
             &mut remote
         }
         (true, None) => {
@@ -334,7 +335,17 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             link_bytes_per_s: link_rates.get(r).copied().flatten(),
         })
         .collect();
-    match run::run_coordinator(scene, &opts, &out_dir, exec, frames, resume, &hosts) {
+    let outcome = run::run_coordinator(scene, &opts, &out_dir, exec, &mut *frames, resume, &hosts);
+    if let Some(why) = frames.lost() {
+        // The results are written; a rank that does not answer would hang
+        // MPI's finalize, so the job ends here (mpirun names the ranks).
+        eprintln!(
+            "rigidsim: error: {why}; results in {}; ending the job",
+            out_dir.display()
+        );
+        world.abort(6);
+    }
+    match outcome {
         Ok(summary) => {
             eprintln!(
                 "rigidsim: {} bodies, {:.3} s simulated in {:.3} s ({:.2}x real time), ended by {}; results in {}",

@@ -153,6 +153,11 @@ pub trait FrameSink {
     fn rank_summary(&self) -> Option<RankSummary> {
         None
     }
+    /// Why the frames' destination stopped answering, if it did (the render
+    /// rank, in `finish`): the job must then end without it.
+    fn lost(&self) -> Option<String> {
+        None
+    }
 }
 
 pub struct NoFrames;
@@ -305,7 +310,7 @@ impl FrameRenderer {
     }
 
     pub fn render_frame(&mut self, frame: &Frame) -> Result<(), String> {
-        self.replay_earlier_frames(frame.first_index);
+        self.replay_earlier_frames(frame.first_index, &mut || {});
         let image = self.draw(frame)?;
         let path = frame_path(&self.dir, frame.index);
         render::write_png_marked(&path, &image, Some(&frame.mark())).map_err(|e| e.to_string())?;
@@ -317,7 +322,9 @@ impl FrameRenderer {
     }
 
     /// Writes `preview.png` of the final state and closes the video.
-    pub fn finish(&mut self, last: &Frame) -> Result<(), String> {
+    /// `alive` is called after each earlier frame replayed into the video
+    /// (the render rank's sign of life while it finishes).
+    pub fn finish(&mut self, last: &Frame, alive: &mut dyn FnMut()) -> Result<(), String> {
         let image = self.draw(last)?;
         let preview = self
             .dir
@@ -327,7 +334,7 @@ impl FrameRenderer {
         render::write_png(&preview, &image).map_err(|e| e.to_string())?;
         // A run resumed at its very end publishes no frame: its video is
         // still the whole of the earlier run's.
-        self.replay_earlier_frames(last.first_index);
+        self.replay_earlier_frames(last.first_index, alive);
         if let Some(v) = self.video.take() {
             v.finish().map_err(|e| e.to_string())?;
         }
@@ -350,7 +357,7 @@ impl FrameRenderer {
     /// published at its index (`Frame::mark`, digests from
     /// `expect_earlier`): a frame drawn by another run in the same folder,
     /// or left from before a frame the renderer dropped, is left out too.
-    fn replay_earlier_frames(&mut self, first: u64) {
+    fn replay_earlier_frames(&mut self, first: u64, alive: &mut dyn FnMut()) {
         if self.replayed {
             return;
         }
@@ -361,6 +368,7 @@ impl FrameRenderer {
         let mut left_out = 0u64;
         let mut first_problem = None;
         for index in 0..first {
+            alive();
             let path = frame_path(&self.dir, index);
             let expected = self
                 .earlier
@@ -421,7 +429,7 @@ impl FrameSink for InlineFrames {
         }
     }
     fn finish(&mut self, last: Frame) -> (u64, u64, Option<String>, Vec<String>) {
-        if let Err(e) = self.0.finish(&last) {
+        if let Err(e) = self.0.finish(&last, &mut || {}) {
             self.0.notes.push(format!("preview not rendered: {e}"));
         }
         (

@@ -964,6 +964,84 @@ fn stalled_worker_ends_the_job_with_an_error_naming_the_rank() {
     );
 }
 
+/// A render rank that stops answering (SIGSTOP, like a PC that froze)
+/// must not hang the job either: rank 0 finishes the run, waits for the
+/// renderer's report only while it hears from it (30 s, `RENDER_DEADLINE`),
+/// writes the results with a note naming the rank, and ends the job with
+/// an error.
+#[test]
+fn stalled_renderer_ends_the_job_after_the_results_are_written() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let out = root.path().join("stalled_renderer");
+    let scene = scene("resting_stack.toml");
+    let args = ["--duration", "200", "--no-sleep"];
+    let what = describe(Ranks::Np(2), &scene, &args);
+    let mut job = spawn(command(Ranks::Np(2), &scene, &out, &args), &out);
+    let started = Instant::now();
+    let victim = loop {
+        let ranks = ranks_of_job(&out);
+        if ranks.len() == 2 && out.join("trajectory.csv").exists() {
+            break ranks.iter().find(|(_, r)| *r == 1).unwrap().0;
+        }
+        if let Some(status) = job.try_wait().unwrap() {
+            panic!("{what}: ended ({status}) before the renderer could be stopped");
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            end_job(&mut job, &out);
+            panic!("{what}: the ranks did not start within 30 s (found {ranks:?})");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    std::thread::sleep(Duration::from_millis(500));
+    let stopped = Command::new("kill")
+        .args(["-STOP", &victim.to_string()])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !stopped {
+        end_job(&mut job, &out);
+        panic!("kill -STOP {victim} (rank 1, the renderer) failed");
+    }
+    // The run itself (about 7 s alone here), then the renderer's deadline.
+    let status = wait_for(&mut job, Duration::from_secs(150));
+    end_job(&mut job, &out);
+    let stderr = stderr_of(&out);
+    let Some(status) = status else {
+        panic!("{what}: still running 150 s after the renderer stopped; stderr:\n{stderr}");
+    };
+    assert!(
+        !status.success(),
+        "{what}: exit status 0 with a stalled renderer"
+    );
+    assert!(
+        stderr.contains("render rank 1"),
+        "{what}: the message does not name the render rank:\n{stderr}"
+    );
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("summary.json"))
+            .unwrap_or_else(|e| panic!("{what}: no summary.json: {e}; stderr:\n{stderr}")),
+    )
+    .unwrap();
+    assert_eq!(summary["end_reason"], "duration", "{what}");
+    assert!(
+        (summary["sim_time_s"].as_f64().unwrap() - 200.0).abs() < 1e-9,
+        "{what}: {}",
+        summary["sim_time_s"]
+    );
+    let noted = summary["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|n| n.as_str().is_some_and(|n| n.contains("render rank 1")));
+    assert!(
+        noted,
+        "{what}: no note names the render rank: {}",
+        summary["notes"]
+    );
+    let rows = check_partial_trajectory(&out.join("trajectory.csv"));
+    assert!(rows > 0, "{what}: the trajectory is empty");
+}
+
 /// `summary.json` reports the parallel fraction p (the share of the wall
 /// time spent in stages other ranks can take) and the Amdahl bound
 /// 1 / (1 − p); on the nuts and bolts most of a rank's time is such work.

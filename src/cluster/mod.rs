@@ -168,6 +168,13 @@ fn pause(spins: u32) {
 /// planned to take milliseconds; even a slowed PC answers within seconds).
 const REPLY_DEADLINE: Duration = Duration::from_secs(10);
 
+/// The render rank silent for this long after the run's last frame is
+/// taken as lost. Its final work comes in pieces that each take well under
+/// a second (a queued frame drawn, an earlier frame read back into the
+/// video), each followed by a `TAG_RENDER_ALIVE` message; the longest
+/// silence is ffmpeg finishing the video, a few seconds.
+const RENDER_DEADLINE: Duration = Duration::from_secs(30);
+
 /// Share of its speed that rank 0 plans for itself (it also packs and merges).
 const COORDINATOR_SHARE: f64 = 0.5;
 /// The same for the self-scheduled stages (island solves, group steps),
@@ -1351,26 +1358,33 @@ const MAX_FRAMES_IN_FLIGHT: usize = 64;
 pub struct RemoteFrames<'w> {
     world: &'w SimpleCommunicator,
     renderer: i32,
+    /// The render rank's host, for the message if it stops answering.
+    host: String,
     in_flight: Vec<(Request<'static, [u8], StaticScope>, *mut [u8])>,
     pub dropped: u64,
     pub bytes_sent: u64,
     report: Option<RenderReport>,
+    /// Set when the render rank stopped answering in `finish`.
+    lost: Option<String>,
 }
 
 impl<'w> RemoteFrames<'w> {
-    pub fn new(world: &'w SimpleCommunicator, renderer: i32) -> Self {
+    pub fn new(world: &'w SimpleCommunicator, renderer: i32, host: String) -> Self {
         RemoteFrames {
             world,
             renderer,
+            host,
             in_flight: Vec::new(),
             dropped: 0,
             bytes_sent: 0,
             report: None,
+            lost: None,
         }
     }
 
-    /// Completes finished sends and frees their buffers.
-    fn reap(&mut self) {
+    /// Completes finished sends and frees their buffers; whether any did.
+    fn reap(&mut self) -> bool {
+        let before = self.in_flight.len();
         let mut still = Vec::new();
         for (req, buf) in self.in_flight.drain(..) {
             match req.test() {
@@ -1381,6 +1395,51 @@ impl<'w> RemoteFrames<'w> {
             }
         }
         self.in_flight = still;
+        self.in_flight.len() < before
+    }
+
+    /// Waits for the render report without blocking inside MPI: while the
+    /// last sends complete and the renderer's `TAG_RENDER_ALIVE` messages
+    /// come, and no longer than `RENDER_DEADLINE` after the last of them,
+    /// so a render rank that stopped (a frozen PC, a hung GPU driver) ends
+    /// the job after the results are written instead of hanging it.
+    fn await_report(&mut self) -> Option<RenderReport> {
+        let renderer = self.world.process_at_rank(self.renderer);
+        let mut heard = Instant::now();
+        let mut spins = 0u32;
+        loop {
+            if self.reap() {
+                heard = Instant::now();
+            }
+            while renderer
+                .immediate_probe_with_tag(protocol::TAG_RENDER_ALIVE)
+                .is_some()
+            {
+                let _ = renderer.receive_vec_with_tag::<u8>(protocol::TAG_RENDER_ALIVE);
+                heard = Instant::now();
+            }
+            if self.in_flight.is_empty()
+                && renderer
+                    .immediate_probe_with_tag(protocol::TAG_RENDER_REPORT)
+                    .is_some()
+            {
+                let (bytes, _) = renderer.receive_vec_with_tag::<u8>(protocol::TAG_RENDER_REPORT);
+                // Signs of life sent before the report have arrived before
+                // it (same sender): none is left unreceived.
+                while renderer
+                    .immediate_probe_with_tag(protocol::TAG_RENDER_ALIVE)
+                    .is_some()
+                {
+                    let _ = renderer.receive_vec_with_tag::<u8>(protocol::TAG_RENDER_ALIVE);
+                }
+                return Some(decode(&bytes).unwrap_or_default());
+            }
+            if heard.elapsed() > RENDER_DEADLINE {
+                return None;
+            }
+            spins += 1;
+            pause(spins);
+        }
     }
 
     fn post(&mut self, msg: &RenderMessage) {
@@ -1412,6 +1471,10 @@ impl FrameSink for RemoteFrames<'_> {
         self.post(&RenderMessage::Earlier(digests));
     }
 
+    fn lost(&self) -> Option<String> {
+        self.lost.clone()
+    }
+
     fn rank_summary(&self) -> Option<RankSummary> {
         let r = self.report.as_ref()?;
         Some(RankSummary {
@@ -1427,16 +1490,24 @@ impl FrameSink for RemoteFrames<'_> {
 
     fn finish(&mut self, last: Frame) -> (u64, u64, Option<String>, Vec<String>) {
         self.post(&RenderMessage::Finish(last));
-        for (req, buf) in self.in_flight.drain(..) {
-            req.wait();
-            // SAFETY: as in `reap`: the send completed.
-            drop(unsafe { Box::from_raw(buf) });
-        }
-        let (bytes, _) = self
-            .world
-            .process_at_rank(self.renderer)
-            .receive_vec_with_tag::<u8>(protocol::TAG_RENDER_REPORT);
-        let report: RenderReport = decode(&bytes).unwrap_or_default();
+        let Some(report) = self.await_report() else {
+            let why = format!(
+                "render rank {} (on host {}) has not answered for {} s after the last frame; \
+                 its frames, preview and video may be incomplete",
+                self.renderer,
+                self.host,
+                RENDER_DEADLINE.as_secs()
+            );
+            eprintln!("rigidsim: rank 0: {why}");
+            self.lost = Some(why.clone());
+            // The sends still in flight are left to MPI with their buffers
+            // (MPI may yet read them; rsmpi panics on dropping an unfinished
+            // request), and the job ends soon (`lost`).
+            for (request, _buffer) in self.in_flight.drain(..) {
+                std::mem::forget(request);
+            }
+            return (0, self.dropped, None, vec![why]);
+        };
         self.report = Some(report.clone());
         (
             report.rendered,
@@ -1491,6 +1562,9 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
                 report.dropped += 1;
             }
         }
+        // Once rank 0 has sent the last frame it waits for the report, and
+        // takes each of these as a sign of life (`RENDER_DEADLINE`).
+        let alive = || root.send_with_tag(&[0u8][..], protocol::TAG_RENDER_ALIVE);
         if let Some(f) = queue.pop_front() {
             if let Some(r) = renderer.as_mut() {
                 let clock = Instant::now();
@@ -1499,11 +1573,14 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
                 }
                 report.busy_s += clock.elapsed().as_secs_f64();
             }
+            if finish.is_some() {
+                alive();
+            }
             continue;
         }
         if let Some(last) = finish.take() {
             if let Some(r) = renderer.as_mut() {
-                if let Err(e) = r.finish(&last) {
+                if let Err(e) = r.finish(&last, &mut { alive }) {
                     report.notes.push(format!("preview: {e}"));
                 }
                 report.rendered = r.rendered;

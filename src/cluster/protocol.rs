@@ -19,6 +19,11 @@ pub const TAG_REPLY: i32 = 11;
 pub const TAG_FRAME: i32 = 12;
 /// Renderer → rank 0, once, after the last frame.
 pub const TAG_RENDER_REPORT: i32 = 13;
+/// Renderer → rank 0, one empty message after each piece of its final
+/// work (a queued frame drawn, an earlier frame replayed into the video):
+/// rank 0 waits for the report only while these keep coming
+/// (`RENDER_DEADLINE`).
+pub const TAG_RENDER_ALIVE: i32 = 14;
 
 /// Sent by rank 0 to one worker.
 #[derive(Debug, Serialize, Deserialize)]
