@@ -231,6 +231,27 @@ fn inertia_not_positive_definite_exits_2() {
     assert_refused(&case, &["objects.thing.inertia", "positive definite"]);
 }
 
+/// An inertia no body of its mass and shape can have (here 1e200 kg·m²
+/// for a 1 kg cube of 0.2 m, which reaches at most 2·m·r² = 0.06 in its
+/// diagonal's sum) is refused; a hollow cube's, near that bound, is not.
+#[test]
+fn inertia_beyond_its_mass_and_shape_exits_2() {
+    let case = Case::new(&one_object(&format!(
+        "{CUBE}\nmass = 1.0\ninertia = [[1e200, 0.0, 0.0], [0.0, 1e200, 0.0], [0.0, 0.0, 1e200]]"
+    )));
+    assert_refused(&case, &["objects.thing.inertia", "larger than any body"]);
+    let just_over = Case::new(&one_object(&format!(
+        "{CUBE}\nmass = 1.0\ninertia = [[0.021, 0.0, 0.0], [0.0, 0.021, 0.0], [0.0, 0.0, 0.021]]"
+    )));
+    assert_refused(&just_over, &["objects.thing.inertia", "at most 2·mass·r²"]);
+    // All the mass on the corners: 2/3 of m·r² = 0.02 about each axis.
+    let corners = Case::new(&one_object(&format!(
+        "{CUBE}\nmass = 1.0\ninertia = [[0.02, 0.0, 0.0], [0.0, 0.02, 0.0], [0.0, 0.0, 0.02]]"
+    )));
+    let o = corners.run(&["--duration", "0.02", "--no-render"]);
+    assert_eq!(o.code, Some(0), "stderr:\n{}", o.stderr);
+}
+
 #[test]
 fn scatter_of_a_billion_bodies_exits_2_quickly() {
     let case = Case::new(&format!(

@@ -575,6 +575,29 @@ fn build_object(
         Some(rows) => {
             let m = Matrix3::from_row_slice(&rows.concat());
             check_inertia(&m).map_err(|e| (format!("{f}.inertia"), e))?;
+            // Every point of the body lies within `reach` of the centre of
+            // mass (the farthest hull vertex), so I_xx + I_yy + I_zz =
+            // 2 ∫ r² dm ≤ 2 m reach² (a thin spherical shell reaches it):
+            // a larger inertia belongs to no body of this mass and shape,
+            // and one of 1e200 kg·m² would leave the contact solve's
+            // products at 1e-200.
+            let reach = named
+                .iter()
+                .flat_map(|p| p.hull.vertices().iter())
+                .map(|v| (v - props.centroid).norm())
+                .fold(0.0, f64::max);
+            let most = 2.0 * mass * reach * reach;
+            if m.trace() > most * (1.0 + 1e-9) {
+                return Err((
+                    format!("{f}.inertia"),
+                    format!(
+                        "is larger than any body of mass {mass} kg within this shape can have: \
+                         its diagonal sums to {:.6e} kg·m², at most 2·mass·r² = {most:.6e} \
+                         (r = {reach:.6e} m, the shape's farthest point from its centre)",
+                        m.trace()
+                    ),
+                ));
+            }
             m
         }
         None => {
