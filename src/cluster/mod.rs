@@ -1498,7 +1498,7 @@ impl FrameSink for RemoteFrames<'_> {
                 self.host,
                 RENDER_DEADLINE.as_secs()
             );
-            eprintln!("rigidsim: rank 0: {why}");
+            // Said once, by the caller, after the results are written.
             self.lost = Some(why.clone());
             // The sends still in flight are left to MPI with their buffers
             // (MPI may yet read them; rsmpi panics on dropping an unfinished
