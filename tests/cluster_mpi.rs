@@ -843,23 +843,7 @@ fn killed_worker_ends_the_job_with_an_error_naming_the_rank() {
     let mut job = spawn(command(Ranks::Np(3), &scene, &out, &args), &out);
 
     // Wait for the three ranks to exist and rank 0 to have started the run.
-    let victim = loop {
-        if let Some(status) = job.try_wait().unwrap() {
-            panic!(
-                "{what}: ended ({status}) before a worker could be killed; stderr:\n{}",
-                stderr_of(&out)
-            );
-        }
-        let ranks = ranks_of_job(&out);
-        if ranks.len() == 3 && out.join("trajectory.csv").exists() {
-            break ranks.iter().find(|(_, r)| *r == 1).unwrap().0;
-        }
-        if started.elapsed() > Duration::from_secs(30) {
-            end_job(&mut job, &out);
-            panic!("{what}: the ranks did not start within 30 s (found {ranks:?})");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let victim = running_rank(&mut job, &out, 3, 1, &what);
     std::thread::sleep(Duration::from_secs(1));
     assert!(
         job.try_wait().unwrap().is_none(),
@@ -908,6 +892,55 @@ fn killed_worker_ends_the_job_with_an_error_naming_the_rank() {
     eprintln!("[cluster_mpi] {rows} complete trajectory rows were kept");
 }
 
+/// Waits until all `ranks` ranks of the job writing `out` run and rank 0
+/// has begun its trajectory; returns rank `victim`'s pid. Ends the job and
+/// panics if it ends first or does not start within 30 s.
+fn running_rank(job: &mut Child, out: &Path, ranks: usize, victim: u32, what: &str) -> u32 {
+    let started = Instant::now();
+    loop {
+        if let Some(status) = job.try_wait().unwrap() {
+            panic!(
+                "{what}: ended ({status}) before rank {victim} could be stopped or killed; \
+                 stderr:\n{}",
+                stderr_of(out)
+            );
+        }
+        let found = ranks_of_job(out);
+        if found.len() == ranks && out.join("trajectory.csv").exists() {
+            return found.iter().find(|(_, r)| *r == victim).unwrap().0;
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            end_job(job, out);
+            panic!("{what}: the ranks did not start within 30 s (found {found:?})");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// `running_rank`, then `settle` longer, then SIGSTOP on rank `victim`
+/// (like a PC that froze). Returns its pid; ends the job and panics where
+/// the signal fails.
+fn stop_rank_once_running(
+    job: &mut Child,
+    out: &Path,
+    ranks: usize,
+    victim: u32,
+    settle: Duration,
+    what: &str,
+) -> u32 {
+    let pid = running_rank(job, out, ranks, victim, what);
+    std::thread::sleep(settle);
+    let stopped = Command::new("kill")
+        .args(["-STOP", &pid.to_string()])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !stopped {
+        end_job(job, out);
+        panic!("kill -STOP {pid} (rank {victim}) failed");
+    }
+    pid
+}
+
 /// A worker that stops answering (here: SIGSTOP, like a PC that froze)
 /// must end the run too, with a message naming it (issue 5: "dies or stops
 /// answering"). Rank 0 has no reply timeout yet, so today it waits forever.
@@ -921,30 +954,7 @@ fn stalled_worker_ends_the_job_with_an_error_naming_the_rank() {
     let args = ["--duration", "600", "--no-render", "--force-distribute"];
     let what = describe(Ranks::Np(3), &scene, &args);
     let mut job = spawn(command(Ranks::Np(3), &scene, &out, &args), &out);
-    let started = Instant::now();
-    let victim = loop {
-        let ranks = ranks_of_job(&out);
-        if ranks.len() == 3 && out.join("trajectory.csv").exists() {
-            break ranks.iter().find(|(_, r)| *r == 1).unwrap().0;
-        }
-        if let Some(status) = job.try_wait().unwrap() {
-            panic!("{what}: ended ({status}) before rank 1 could be stopped");
-        }
-        if started.elapsed() > Duration::from_secs(30) {
-            end_job(&mut job, &out);
-            panic!("{what}: the ranks did not start within 30 s (found {ranks:?})");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    std::thread::sleep(Duration::from_secs(1));
-    let stopped = Command::new("kill")
-        .args(["-STOP", &victim.to_string()])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !stopped {
-        end_job(&mut job, &out);
-        panic!("kill -STOP {victim} (rank 1) failed");
-    }
+    let victim = stop_rank_once_running(&mut job, &out, 3, 1, Duration::from_secs(1), &what);
     let status = wait_for(&mut job, END_AFTER_STALL);
     end_job(&mut job, &out);
     let stderr = stderr_of(&out);
@@ -978,30 +988,7 @@ fn stalled_renderer_ends_the_job_after_the_results_are_written() {
     let args = ["--duration", "200", "--no-sleep"];
     let what = describe(Ranks::Np(2), &scene, &args);
     let mut job = spawn(command(Ranks::Np(2), &scene, &out, &args), &out);
-    let started = Instant::now();
-    let victim = loop {
-        let ranks = ranks_of_job(&out);
-        if ranks.len() == 2 && out.join("trajectory.csv").exists() {
-            break ranks.iter().find(|(_, r)| *r == 1).unwrap().0;
-        }
-        if let Some(status) = job.try_wait().unwrap() {
-            panic!("{what}: ended ({status}) before the renderer could be stopped");
-        }
-        if started.elapsed() > Duration::from_secs(30) {
-            end_job(&mut job, &out);
-            panic!("{what}: the ranks did not start within 30 s (found {ranks:?})");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    std::thread::sleep(Duration::from_millis(500));
-    let stopped = Command::new("kill")
-        .args(["-STOP", &victim.to_string()])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !stopped {
-        end_job(&mut job, &out);
-        panic!("kill -STOP {victim} (rank 1, the renderer) failed");
-    }
+    stop_rank_once_running(&mut job, &out, 2, 1, Duration::from_millis(500), &what);
     // The run itself (about 7 s alone here), then the renderer's deadline.
     let status = wait_for(&mut job, Duration::from_secs(150));
     end_job(&mut job, &out);

@@ -1405,17 +1405,24 @@ impl<'w> RemoteFrames<'w> {
     /// the job after the results are written instead of hanging it.
     fn await_report(&mut self) -> Option<RenderReport> {
         let renderer = self.world.process_at_rank(self.renderer);
-        let mut heard = Instant::now();
-        let mut spins = 0u32;
-        loop {
-            if self.reap() {
-                heard = Instant::now();
-            }
+        // Receives the signs of life that have arrived; whether there were any.
+        let take_alive = || {
+            let mut any = false;
             while renderer
                 .immediate_probe_with_tag(protocol::TAG_RENDER_ALIVE)
                 .is_some()
             {
                 let _ = renderer.receive_vec_with_tag::<u8>(protocol::TAG_RENDER_ALIVE);
+                any = true;
+            }
+            any
+        };
+        let mut heard = Instant::now();
+        let mut spins = 0u32;
+        loop {
+            // (Both run: each completes what has arrived.)
+            let sent = self.reap();
+            if take_alive() | sent {
                 heard = Instant::now();
             }
             if self.in_flight.is_empty()
@@ -1426,12 +1433,7 @@ impl<'w> RemoteFrames<'w> {
                 let (bytes, _) = renderer.receive_vec_with_tag::<u8>(protocol::TAG_RENDER_REPORT);
                 // Signs of life sent before the report have arrived before
                 // it (same sender): none is left unreceived.
-                while renderer
-                    .immediate_probe_with_tag(protocol::TAG_RENDER_ALIVE)
-                    .is_some()
-                {
-                    let _ = renderer.receive_vec_with_tag::<u8>(protocol::TAG_RENDER_ALIVE);
-                }
+                take_alive();
                 return Some(decode(&bytes).unwrap_or_default());
             }
             if heard.elapsed() > RENDER_DEADLINE {
@@ -1540,6 +1542,9 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
     };
     let mut queue: VecDeque<Frame> = VecDeque::new();
     let mut finish: Option<Frame> = None;
+    // Once rank 0 has sent the last frame it waits for the report, and
+    // takes each of these as a sign of life (`RENDER_DEADLINE`).
+    let mut alive = || root.send_with_tag(&[0u8][..], protocol::TAG_RENDER_ALIVE);
     loop {
         // Take in everything that has arrived (blocking only when idle).
         while finish.is_none()
@@ -1562,9 +1567,6 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
                 report.dropped += 1;
             }
         }
-        // Once rank 0 has sent the last frame it waits for the report, and
-        // takes each of these as a sign of life (`RENDER_DEADLINE`).
-        let alive = || root.send_with_tag(&[0u8][..], protocol::TAG_RENDER_ALIVE);
         if let Some(f) = queue.pop_front() {
             if let Some(r) = renderer.as_mut() {
                 let clock = Instant::now();
@@ -1580,7 +1582,7 @@ pub fn renderer_loop(world: &SimpleCommunicator, scene: &Scene, out_dir: &Path) 
         }
         if let Some(last) = finish.take() {
             if let Some(r) = renderer.as_mut() {
-                if let Err(e) = r.finish(&last, &mut { alive }) {
+                if let Err(e) = r.finish(&last, &mut alive) {
                     report.notes.push(format!("preview: {e}"));
                 }
                 report.rendered = r.rendered;

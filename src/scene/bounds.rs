@@ -162,11 +162,17 @@ pub fn extent<'a>(parts: impl Iterator<Item = &'a ConvexPolyhedron>) -> f64 {
 
 /// The largest distance of a vertex of `object` from its centre of mass.
 pub fn reach(object: &ObjectDef) -> f64 {
-    object
-        .parts
-        .iter()
-        .flat_map(|p| p.hull.vertices().iter())
-        .map(|v| v.norm())
+    reach_from(object.parts.iter().map(|p| &p.hull), &Vector3::zeros())
+}
+
+/// The largest distance of a vertex of `parts` from `centre`.
+pub fn reach_from<'a>(
+    parts: impl Iterator<Item = &'a ConvexPolyhedron>,
+    centre: &Vector3<f64>,
+) -> f64 {
+    parts
+        .flat_map(|p| p.vertices().iter())
+        .map(|v| (v - centre).norm())
         .fold(0.0, f64::max)
 }
 

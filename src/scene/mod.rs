@@ -581,11 +581,7 @@ fn build_object(
             // a larger inertia belongs to no body of this mass and shape,
             // and one of 1e200 kg·m² would leave the contact solve's
             // products at 1e-200.
-            let reach = named
-                .iter()
-                .flat_map(|p| p.hull.vertices().iter())
-                .map(|v| (v - props.centroid).norm())
-                .fold(0.0, f64::max);
+            let reach = bounds::reach_from(named.iter().map(|p| &p.hull), &props.centroid);
             let most = 2.0 * mass * reach * reach;
             if m.trace() > most * (1.0 + 1e-9) {
                 return Err((
