@@ -1796,6 +1796,10 @@ impl LcpWorkspace {
     fn polish(&mut self, p: &LcpProblem, ctx: Ctx) -> Result<(), LcpError> {
         let m = self.clamped.len();
         if m == 0 {
+            // The factor of no rows: `settle` may have sent every clamped
+            // row back, and the drive's `direction` takes an empty C as it
+            // stands (a stale factor would be appended to past its end).
+            self.factor.clear();
             return Ok(());
         }
         self.factor.dirty = true;
