@@ -280,6 +280,8 @@ pub struct MpiExecutor<'w> {
     /// Distribute regardless of cost (tests of determinism and balance).
     pub force_distribute: bool,
     net: Network,
+    /// Where the group steps went and what they took (`GroupChoice`).
+    group_choice: schedule::GroupChoice,
 }
 
 impl<'w> MpiExecutor<'w> {
@@ -298,6 +300,7 @@ impl<'w> MpiExecutor<'w> {
             parts: objects.iter().map(|o| o.parts.len()).collect(),
             force_distribute: false,
             net: Network::default(),
+            group_choice: schedule::GroupChoice::default(),
             roles,
         };
         exec.measure_latency();
@@ -887,8 +890,28 @@ impl MpiExecutor<'_> {
         // Seconds, from what the same bodies' groups took last step.
         let costs: Vec<f64> = inputs.iter().map(GroupInput::predicted_s).collect();
         let total: f64 = costs.iter().sum();
-        let workers =
+        let modelled =
             self.workers_for_stage(Stage::StepGroups, total, inputs.len(), SELF_SCHEDULED_SHARE);
+        let workers = self
+            .group_choice
+            .workers(modelled, self.roles.workers.len(), inputs.len());
+        let started = Instant::now();
+        let replies = self.step_groups_on(st, params, inputs, costs, workers);
+        self.group_choice
+            .record(workers > 0, total, started.elapsed().as_secs_f64());
+        replies
+    }
+
+    /// The group steps on rank 0 alone (`workers` = 0) or self-scheduled
+    /// over rank 0 and `workers` workers.
+    fn step_groups_on(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+        costs: Vec<f64>,
+        workers: usize,
+    ) -> Vec<GroupReply> {
         if workers == 0 {
             // On rank 0, whose executor (this one) still scatters the
             // groups' own narrowphase batches and island solves where they

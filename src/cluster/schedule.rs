@@ -225,6 +225,87 @@ pub fn workers_to_use_over_link(
     best
 }
 
+/// Group steps stay on rank 0 for at most this many steps in a row, when
+/// the cost model keeps them there, before one step is distributed anyway
+/// to measure it again (`GroupChoice`).
+pub const GROUP_PROBE_EVERY: u32 = 16;
+/// Weight of the newest step in the measured seconds per unit of cost.
+const GROUP_RATE_WEIGHT: f64 = 0.25;
+
+/// Whether the group steps go to workers, from what they took: the cost
+/// model (`workers_to_use_over_link`) adds the stage's bytes at the link
+/// rate measured at start-up, and on shared memory that rate (64 KiB
+/// echoes) is far below what a self-scheduled stage pays, whose sends
+/// overlap rank 0's own groups; with speeds that a meter over microsecond
+/// batches swings by 2-10×, the 200-body pour on 2 ranks kept its groups on
+/// rank 0 in half of its steps in some runs and in none in others (wall
+/// 1.68-1.75 s against 1.48-1.50 s, the same state hash). So where the
+/// model says "stay", the measured wall seconds per unit of predicted cost
+/// of the steps that went out and of those that stayed decide; a run of
+/// `GROUP_PROBE_EVERY` steps kept home sends one out, so the measure of
+/// the distributed steps stays current. Where the model says "go", it
+/// goes, as before. Only where the work is done depends on this, never a
+/// result. The first step the model keeps home is such a probe.
+#[derive(Clone, Debug)]
+pub struct GroupChoice {
+    /// Wall seconds per unit of predicted cost, smoothed (0: not measured).
+    local_s_per_cost: f64,
+    distributed_s_per_cost: f64,
+    home_in_a_row: u32,
+}
+
+impl Default for GroupChoice {
+    fn default() -> Self {
+        GroupChoice {
+            local_s_per_cost: 0.0,
+            distributed_s_per_cost: 0.0,
+            home_in_a_row: GROUP_PROBE_EVERY,
+        }
+    }
+}
+
+impl GroupChoice {
+    /// Workers for this step's groups: `modelled` where the model sends
+    /// them out, else all `workers` where the distributed steps measured
+    /// faster by `DISTRIBUTE_MARGIN` or a probe is due, else none.
+    pub fn workers(&self, modelled: usize, workers: usize, tasks: usize) -> usize {
+        if modelled > 0 || workers == 0 || tasks < 2 {
+            return modelled;
+        }
+        let (home, out) = (self.local_s_per_cost, self.distributed_s_per_cost);
+        let faster_out = home > 0.0 && out > 0.0 && out < home * (1.0 - DISTRIBUTE_MARGIN);
+        if faster_out || self.home_in_a_row >= GROUP_PROBE_EVERY {
+            workers
+        } else {
+            0
+        }
+    }
+
+    /// Records a step's groups: whether they went out, their predicted
+    /// cost and the wall seconds the stage took.
+    pub fn record(&mut self, distributed: bool, cost: f64, wall_s: f64) {
+        if distributed {
+            self.home_in_a_row = 0;
+        } else {
+            self.home_in_a_row += 1;
+        }
+        if !(cost > 0.0 && wall_s.is_finite()) {
+            return;
+        }
+        let rate = if distributed {
+            &mut self.distributed_s_per_cost
+        } else {
+            &mut self.local_s_per_cost
+        };
+        let measured = wall_s / cost;
+        *rate = if *rate > 0.0 {
+            (1.0 - GROUP_RATE_WEIGHT) * *rate + GROUP_RATE_WEIGHT * measured
+        } else {
+            measured
+        };
+    }
+}
+
 /// The slots of rank 0 and of the `k` fastest workers (ties to the lower
 /// slot, so the choice is deterministic), as a mask over `speeds`.
 pub fn fastest_slots(speeds: &[f64], k: usize) -> Vec<bool> {
@@ -253,6 +334,32 @@ pub fn makespan(costs: &[f64], speeds: &[f64], slot: &[usize]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn group_steps_go_out_where_they_measured_faster() {
+        let mut choice = GroupChoice::default();
+        // The model sends them: they go, whatever was measured.
+        assert_eq!(choice.workers(1, 1, 10), 1);
+        // Nothing measured yet: the first "stay" is a probe.
+        assert_eq!(choice.workers(0, 1, 10), 1);
+        choice.record(true, 1e-3, 1e-3);
+        // Home not measured yet: the model's "stay" holds.
+        assert_eq!(choice.workers(0, 1, 10), 0);
+        choice.record(false, 1e-3, 2e-3);
+        // Out measured twice as fast as home: every worker.
+        assert_eq!(choice.workers(0, 3, 10), 3);
+        // Out measured slower than home: home, until the next probe.
+        choice.record(true, 1e-3, 9e-3);
+        choice.record(true, 1e-3, 9e-3);
+        for _ in 0..GROUP_PROBE_EVERY {
+            assert_eq!(choice.workers(0, 1, 10), 0);
+            choice.record(false, 1e-3, 2e-3);
+        }
+        assert_eq!(choice.workers(0, 1, 10), 1);
+        // One group, or no worker: home.
+        assert_eq!(choice.workers(0, 1, 1), 0);
+        assert_eq!(choice.workers(0, 0, 10), 0);
+    }
 
     #[test]
     fn small_stages_stay_on_rank_0_and_large_ones_use_every_worker() {
