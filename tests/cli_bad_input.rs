@@ -835,3 +835,30 @@ fn same_scene_twice_gives_the_same_state_hash() {
     assert_eq!(a["state_hash"], b["state_hash"]);
     assert_eq!(rows_a, rows_b, "trajectories differ between identical runs");
 }
+
+/// A trajectory that cannot be written (a full disk: `trajectory.csv` links
+/// to /dev/full) ends the run with one line naming the file and the
+/// system's reason and a non-zero exit, without a panic or a hang: rows
+/// are written on a thread of their own, and its error reaches the run.
+#[test]
+fn a_full_disk_ends_the_run_naming_the_trajectory() {
+    if !Path::new("/dev/full").exists() {
+        eprintln!("skipped: no /dev/full here");
+        return;
+    }
+    let case = Case::new(TINY);
+    std::fs::create_dir(case.path("out")).unwrap();
+    std::os::unix::fs::symlink("/dev/full", case.path("out/trajectory.csv")).unwrap();
+    let o = case.run(&["--duration", "0.5"]);
+    assert_no_panic(&o);
+    assert_ne!(o.code, Some(0), "stderr:\n{}", o.stderr);
+    let line = o
+        .stderr
+        .lines()
+        .find(|l| l.starts_with("rigidsim: error:"))
+        .unwrap_or_else(|| panic!("no error line:\n{}", o.stderr));
+    assert!(
+        line.contains("trajectory.csv") && line.contains("No space left"),
+        "{line}"
+    );
+}
