@@ -892,9 +892,18 @@ impl MpiExecutor<'_> {
         let total: f64 = costs.iter().sum();
         let modelled =
             self.workers_for_stage(Stage::StepGroups, total, inputs.len(), SELF_SCHEDULED_SHARE);
+        // Where measured times send the groups out: to the workers the model
+        // would use without the link's bytes (a much slower worker stays
+        // left out), at least one.
+        let without_link = if self.roles.workers.is_empty() {
+            0
+        } else {
+            schedule::workers_to_use(total, &self.speeds, SELF_SCHEDULED_SHARE, self.latency_s)
+                .max(1)
+        };
         let workers = self
             .group_choice
-            .workers(modelled, self.roles.workers.len(), inputs.len());
+            .workers(modelled, without_link, inputs.len());
         let started = Instant::now();
         let replies = self.step_groups_on(st, params, inputs, costs, workers);
         self.group_choice

@@ -266,8 +266,9 @@ impl Default for GroupChoice {
 
 impl GroupChoice {
     /// Workers for this step's groups: `modelled` where the model sends
-    /// them out, else all `workers` where the distributed steps measured
-    /// faster by `DISTRIBUTE_MARGIN` or a probe is due, else none.
+    /// them out, else `workers` (the caller's choice of who would take
+    /// them) where the distributed steps measured faster by
+    /// `DISTRIBUTE_MARGIN` or a probe is due, else none.
     pub fn workers(&self, modelled: usize, workers: usize, tasks: usize) -> usize {
         if modelled > 0 || workers == 0 || tasks < 2 {
             return modelled;
