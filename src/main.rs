@@ -14,6 +14,10 @@
 mod view;
 
 use clap::{Args, Parser, Subcommand};
+
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use mpi::topology::Communicator;
 use mpi::traits::Root;
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
