@@ -36,26 +36,8 @@ cargo build --release --quiet --manifest-path bench/tools/Cargo.toml --target-di
 mkdir -p "$out"
 tmp=$(mktemp -d)
 if [ "${KEEP_RUNS:-0}" = 1 ]; then echo "bench_pour: runs kept in $tmp"; else trap 'rm -rf "$tmp"' EXIT; fi
-here=$(git rev-parse --short HEAD 2>/dev/null || echo here)
-[ -n "$(git status --porcelain --untracked-files=no 2>/dev/null)" ] && here="$here+"
-# Private copies: a rebuild of target/ during the runs must not mix versions.
-declare -A bin
-bin[$here]=$tmp/rigidsim-$here
-cp "${CARGO_TARGET_DIR:-target}"/release/rigidsim "${bin[$here]}"
-labels=("$here")
-if [ "$BASE" != none ]; then
-  base=$(git rev-parse --short "$BASE")
-  tree=target/bench-base/$base
-  if [ ! -x "$tree/target/release/rigidsim" ]; then
-    rm -rf "$tree"
-    git worktree prune
-    git worktree add --detach "$tree" "$base" >/dev/null
-    (cd "$tree" && cargo build --release --quiet)
-  fi
-  bin[$base]=$tmp/rigidsim-$base
-  cp "$tree/target/release/rigidsim" "${bin[$base]}"
-  labels=("$base" "$here")
-fi
+source scripts/bench_builds.sh
+bench_builds
 
 # crowd COUNT HALF_WIDTH TOP: the bundled scene with its scatter box changed.
 crowd() {

@@ -22,25 +22,8 @@ cargo build --release --quiet
 mkdir -p "$out"
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-here=$(git rev-parse --short HEAD 2>/dev/null || echo here)
-[ -n "$(git status --porcelain --untracked-files=no 2>/dev/null)" ] && here="$here+"
-declare -A bin
-bin[$here]=$tmp/rigidsim-$here
-cp "${CARGO_TARGET_DIR:-target}"/release/rigidsim "${bin[$here]}"
-labels=("$here")
-if [ "$BASE" != none ]; then
-  base=$(git rev-parse --short "$BASE")
-  tree=target/bench-base/$base
-  if [ ! -x "$tree/target/release/rigidsim" ]; then
-    rm -rf "$tree"
-    git worktree prune
-    git worktree add --detach "$tree" "$base" >/dev/null
-    (cd "$tree" && cargo build --release --quiet)
-  fi
-  bin[$base]=$tmp/rigidsim-$base
-  cp "$tree/target/release/rigidsim" "${bin[$base]}"
-  labels=("$base" "$here")
-fi
+source scripts/bench_builds.sh
+bench_builds
 
 sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
     -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' \
