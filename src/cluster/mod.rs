@@ -904,6 +904,9 @@ impl MpiExecutor<'_> {
         let workers = self
             .group_choice
             .workers(modelled, without_link, inputs.len());
+        if workers > 0 && modelled == 0 {
+            self.dist.groups_by_measure += 1;
+        }
         let started = Instant::now();
         let replies = self.step_groups_on(st, params, inputs, costs, workers);
         self.group_choice

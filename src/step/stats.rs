@@ -140,6 +140,10 @@ pub struct Distribution {
     /// steps that ran them on rank 0 alone.
     pub groups_distributed: u64,
     pub groups_local: u64,
+    /// Of `groups_distributed`, the steps the cost model would have kept on
+    /// rank 0 and the measured times (or a probe) sent out
+    /// (`cluster::schedule::GroupChoice`).
+    pub groups_by_measure: u64,
     /// Groups too large to share out whole whose first stage went out in
     /// ranges of their pairs before they stepped (`PreparePairs`).
     pub groups_prepared: u64,
