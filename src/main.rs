@@ -14,10 +14,6 @@
 mod view;
 
 use clap::{Args, Parser, Subcommand};
-
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use mpi::topology::Communicator;
 use mpi::traits::Root;
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
@@ -28,6 +24,10 @@ use rigidsim::run::{self, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunE
 use rigidsim::step::{Executor, Inline};
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+/// The step allocates many small vectors; see Cargo.toml.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 #[derive(Parser, Debug)]
 #[command(

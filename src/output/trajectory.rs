@@ -84,27 +84,30 @@ impl RowWriter {
         flushed: mpsc::SyncSender<std::io::Result<TrajectoryMark>>,
         failed: Arc<Mutex<Option<std::io::Error>>>,
     ) {
+        // The first error, kept to answer every later flush with.
         let mut error: Option<(std::io::ErrorKind, String)> = None;
-        let copy = |e: &(std::io::ErrorKind, String)| std::io::Error::new(e.0, e.1.clone());
+        let again = |e: &(std::io::ErrorKind, String)| std::io::Error::new(e.0, e.1.clone());
         for job in jobs {
-            let done = match job {
-                Job::Rows(time, rows) if error.is_none() => self.rows(time, &rows),
-                Job::Rows(..) => Ok(()),
-                Job::Flush => {
-                    let r = match &error {
-                        Some(e) => Err(copy(e)),
-                        None => self.out.flush().map(|()| self.mark),
-                    };
-                    if let Err(e) = &r {
-                        error.get_or_insert((e.kind(), e.to_string()));
+            match job {
+                Job::Rows(time, rows) => {
+                    if error.is_none() {
+                        if let Err(e) = self.rows(time, &rows) {
+                            error = Some((e.kind(), e.to_string()));
+                            *failed.lock().unwrap() = Some(e);
+                        }
                     }
-                    let _ = flushed.send(r.map_err(|e| copy(&(e.kind(), e.to_string()))));
-                    Ok(())
                 }
-            };
-            if let Err(e) = done {
-                error = Some((e.kind(), e.to_string()));
-                *failed.lock().unwrap() = Some(e);
+                Job::Flush => {
+                    if error.is_none() {
+                        if let Err(e) = self.out.flush() {
+                            error = Some((e.kind(), e.to_string()));
+                        }
+                    }
+                    let _ = flushed.send(match &error {
+                        Some(e) => Err(again(e)),
+                        None => Ok(self.mark),
+                    });
+                }
             }
         }
         // Dropped: the BufWriter flushes what it holds.
@@ -221,12 +224,11 @@ impl TrajectoryWriter {
     }
 
     fn send(&self, job: Job) -> std::io::Result<()> {
-        let closed = || std::io::Error::other("the trajectory writer thread stopped");
         self.rows
             .as_ref()
-            .ok_or_else(closed)?
+            .ok_or_else(stopped)?
             .send(job)
-            .map_err(|_| closed())
+            .map_err(|_| stopped())
     }
 
     /// Writes every body's row at `time` (once per time). Rows are written
@@ -260,16 +262,18 @@ impl TrajectoryWriter {
         self.send(Job::Rows(time, rows))
     }
 
-    /// Waits until every row handed over is written and the file flushed.
+    /// Waits until every row handed over is written and the file flushed
+    /// (or answers the first write error: the thread takes jobs in order).
     pub fn flush(&mut self) -> std::io::Result<()> {
         self.send(Job::Flush)?;
-        let mark = self
-            .flushed
-            .recv()
-            .map_err(|_| std::io::Error::other("the trajectory writer thread stopped"))??;
-        self.mark = mark;
-        self.check()
+        self.mark = self.flushed.recv().map_err(|_| stopped())??;
+        Ok(())
     }
+}
+
+/// The error for a writer thread that is gone.
+fn stopped() -> std::io::Error {
+    std::io::Error::other("the trajectory writer thread stopped")
 }
 
 impl Drop for TrajectoryWriter {
