@@ -188,12 +188,13 @@ impl PairBook {
     /// The latest segment start of the bodies connected to body `i` by
     /// candidate pairs (itself included).
     fn latest_start(&self, seg: &[Segment], i: usize) -> f64 {
-        let mut seen = BTreeSet::from([i as u32]);
+        let mut seen = vec![false; self.partners.len()];
+        seen[i] = true;
         let mut frontier = vec![i as u32];
         let mut latest = seg[i].time;
         while let Some(j) = frontier.pop() {
             for &k in &self.partners[j as usize] {
-                if seen.insert(k) {
+                if !std::mem::replace(&mut seen[k as usize], true) {
                     latest = latest.max(seg[k as usize].time);
                     frontier.push(k);
                 }
@@ -315,10 +316,14 @@ pub(crate) fn step_group(
         // rolls back and is solved as at an impact. Not before the latest
         // event of the bodies its pairs reach, where their segments start
         // (only those: what else the group holds must not move it).
+        // (The latest start only delays it: one due no earlier than the
+        // impact needs no search of the bodies its pairs reach.)
+        let before_impact = |at: f64| violation.is_none_or(|(_, t)| at < t);
         let due = spin_resolves
             .next()
+            .filter(|&(at, _)| before_impact(at))
             .map(|(at, i)| (at.max(book.latest_start(&seg, i)), i))
-            .filter(|&(at, _)| violation.is_none_or(|(_, t)| at < t));
+            .filter(|&(at, _)| before_impact(at));
         let spin_resolve = due.is_some();
         let Some((mut pair, mut tau)) = due.map(|(at, i)| ((i as u32, i as u32), at)).or(violation)
         else {
