@@ -280,8 +280,10 @@ pub struct MpiExecutor<'w> {
     /// Distribute regardless of cost (tests of determinism and balance).
     pub force_distribute: bool,
     net: Network,
-    /// Where the group steps went and what they took (`GroupChoice`).
-    group_choice: schedule::GroupChoice,
+    /// Where the group steps and the island solves went and what they
+    /// took (`StageChoice`).
+    group_choice: schedule::StageChoice,
+    solve_choice: schedule::StageChoice,
 }
 
 impl<'w> MpiExecutor<'w> {
@@ -300,7 +302,8 @@ impl<'w> MpiExecutor<'w> {
             parts: objects.iter().map(|o| o.parts.len()).collect(),
             force_distribute: false,
             net: Network::default(),
-            group_choice: schedule::GroupChoice::default(),
+            group_choice: schedule::StageChoice::default(),
+            solve_choice: schedule::StageChoice::default(),
             roles,
         };
         exec.measure_latency();
@@ -848,12 +851,23 @@ impl MpiExecutor<'_> {
         let costs: Vec<f64> = units.iter().map(|u| u * self.model.island_coef).collect();
         let total: f64 = costs.iter().sum();
         // Self-scheduled: rank 0 works at its full speed (as for groups).
-        let workers = self.workers_for_stage(
+        let modelled = self.workers_for_stage(
             Stage::SolveIslands,
             total,
             tasks.len(),
             SELF_SCHEDULED_SHARE,
         );
+        // Where measured times send the solves out, as for the group steps.
+        let workers = self.solve_choice.workers(
+            modelled,
+            self.workers_without_link(total),
+            tasks.len(),
+        );
+        if workers > 0 && modelled == 0 {
+            self.dist.solves_by_measure += 1;
+        }
+        let started = Instant::now();
+        let predicted = total;
         if workers == 0 {
             self.dist.solve_local += 1;
             let clock = Instant::now();
@@ -862,6 +876,8 @@ impl MpiExecutor<'_> {
             self.model.calibrate_islands(units.iter().sum(), s);
             self.book[0].busy_s += s;
             self.book[0].tasks_is += tasks.len() as u64;
+            self.solve_choice
+                .record(false, predicted, started.elapsed().as_secs_f64());
             return r;
         }
         self.dist.solve_distributed += 1;
@@ -878,7 +894,22 @@ impl MpiExecutor<'_> {
         );
         self.model.calibrate_islands(units.iter().sum(), total_busy);
         self.book[0].tasks_is += own_tasks.len() as u64;
+        self.solve_choice
+            .record(true, predicted, started.elapsed().as_secs_f64());
         results
+    }
+
+    /// Workers a self-scheduled stage of this estimated cost takes where
+    /// its measured times send it out (`StageChoice`): those the model would
+    /// use without the link's bytes (a much slower worker stays left out),
+    /// at least one.
+    fn workers_without_link(&self, estimated_s: f64) -> usize {
+        if self.roles.workers.is_empty() {
+            0
+        } else {
+            schedule::workers_to_use(estimated_s, &self.speeds, SELF_SCHEDULED_SHARE, self.latency_s)
+                .max(1)
+        }
     }
 
     fn step_groups_stage(
@@ -892,18 +923,10 @@ impl MpiExecutor<'_> {
         let total: f64 = costs.iter().sum();
         let modelled =
             self.workers_for_stage(Stage::StepGroups, total, inputs.len(), SELF_SCHEDULED_SHARE);
-        // Where measured times send the groups out: to the workers the model
-        // would use without the link's bytes (a much slower worker stays
-        // left out), at least one.
-        let without_link = if self.roles.workers.is_empty() {
-            0
-        } else {
-            schedule::workers_to_use(total, &self.speeds, SELF_SCHEDULED_SHARE, self.latency_s)
-                .max(1)
-        };
-        let workers = self
-            .group_choice
-            .workers(modelled, without_link, inputs.len());
+        // Where measured times send the groups out (`StageChoice`).
+        let workers =
+            self.group_choice
+                .workers(modelled, self.workers_without_link(total), inputs.len());
         if workers > 0 && modelled == 0 {
             self.dist.groups_by_measure += 1;
         }

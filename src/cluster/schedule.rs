@@ -225,48 +225,51 @@ pub fn workers_to_use_over_link(
     best
 }
 
-/// Group steps stay on rank 0 for at most this many steps in a row, when
-/// the cost model keeps them there, before one step is distributed anyway
-/// to measure it again (`GroupChoice`).
-pub const GROUP_PROBE_EVERY: u32 = 16;
+/// A stage stays on rank 0 for at most this many steps in a row, when the
+/// cost model keeps it there, before one step is distributed anyway to
+/// measure it again (`StageChoice`).
+pub const PROBE_EVERY: u32 = 16;
 /// Weight of the newest step in the measured seconds per unit of cost.
-const GROUP_RATE_WEIGHT: f64 = 0.25;
+const RATE_WEIGHT: f64 = 0.25;
 
-/// Whether the group steps go to workers, from what they took: the cost
-/// model (`workers_to_use_over_link`) adds the stage's bytes at the link
-/// rate measured at start-up, and on shared memory that rate (64 KiB
-/// echoes) is far below what a self-scheduled stage pays, whose sends
-/// overlap rank 0's own groups; with speeds that a meter over microsecond
-/// batches swings by 2-10×, the 200-body pour on 2 ranks kept its groups on
-/// rank 0 in half of its steps in some runs and in none in others (wall
-/// 1.68-1.75 s against 1.48-1.50 s, the same state hash). So where the
-/// model says "stay", the measured wall seconds per unit of predicted cost
-/// of the steps that went out and of those that stayed decide; a run of
-/// `GROUP_PROBE_EVERY` steps kept home sends one out, so the measure of
-/// the distributed steps stays current. Where the model says "go", it
-/// goes, as before. Only where the work is done depends on this, never a
-/// result. The first step the model keeps home is such a probe.
+/// Whether a self-scheduled stage (the group steps, the island solves)
+/// goes to workers, from what it took: the cost model
+/// (`workers_to_use_over_link`) adds the stage's bytes at the link rate
+/// measured at start-up, and on shared memory that rate (64 KiB echoes) is
+/// far below what a self-scheduled stage pays, whose sends overlap rank
+/// 0's own share; with speeds that a meter over microsecond batches swings
+/// by 2-10×, the 200-body pour on 2 ranks kept its groups on rank 0 in
+/// half of its steps in some runs and in none in others (wall 1.68-1.75 s
+/// against 1.48-1.50 s, the same state hash), and eight stacks of 15 boxes
+/// kept their solves home in 97 % of the steps, two ranks taking 1.38 of
+/// one rank's time. So where the model says "stay", the measured wall
+/// seconds per unit of predicted cost of the steps that went out and of
+/// those that stayed decide; a run of `PROBE_EVERY` steps kept home sends
+/// one out, so the measure of the distributed steps stays current. Where
+/// the model says "go", it goes, as before. Only where the work is done
+/// depends on this, never a result. The first step the model keeps home
+/// is such a probe.
 #[derive(Clone, Debug)]
-pub struct GroupChoice {
+pub struct StageChoice {
     /// Wall seconds per unit of predicted cost, smoothed (0: not measured).
     local_s_per_cost: f64,
     distributed_s_per_cost: f64,
     home_in_a_row: u32,
 }
 
-impl Default for GroupChoice {
+impl Default for StageChoice {
     fn default() -> Self {
-        GroupChoice {
+        StageChoice {
             local_s_per_cost: 0.0,
             distributed_s_per_cost: 0.0,
-            home_in_a_row: GROUP_PROBE_EVERY,
+            home_in_a_row: PROBE_EVERY,
         }
     }
 }
 
-impl GroupChoice {
-    /// Workers for this step's groups: `modelled` where the model sends
-    /// them out, else `workers` (the caller's choice of who would take
+impl StageChoice {
+    /// Workers for this step's stage: `modelled` where the model sends
+    /// it out, else `workers` (the caller's choice of who would take
     /// them) where the distributed steps measured faster by
     /// `DISTRIBUTE_MARGIN` or a probe is due, else none.
     pub fn workers(&self, modelled: usize, workers: usize, tasks: usize) -> usize {
@@ -275,15 +278,15 @@ impl GroupChoice {
         }
         let (home, out) = (self.local_s_per_cost, self.distributed_s_per_cost);
         let faster_out = home > 0.0 && out > 0.0 && out < home * (1.0 - DISTRIBUTE_MARGIN);
-        if faster_out || self.home_in_a_row >= GROUP_PROBE_EVERY {
+        if faster_out || self.home_in_a_row >= PROBE_EVERY {
             workers
         } else {
             0
         }
     }
 
-    /// Records a step's groups: whether they went out, their predicted
-    /// cost and the wall seconds the stage took.
+    /// Records a step's stage: whether it went out, its predicted cost and
+    /// the wall seconds it took.
     pub fn record(&mut self, distributed: bool, cost: f64, wall_s: f64) {
         if distributed {
             self.home_in_a_row = 0;
@@ -300,7 +303,7 @@ impl GroupChoice {
         };
         let measured = wall_s / cost;
         *rate = if *rate > 0.0 {
-            (1.0 - GROUP_RATE_WEIGHT) * *rate + GROUP_RATE_WEIGHT * measured
+            (1.0 - RATE_WEIGHT) * *rate + RATE_WEIGHT * measured
         } else {
             measured
         };
@@ -338,7 +341,7 @@ mod tests {
 
     #[test]
     fn group_steps_go_out_where_they_measured_faster() {
-        let mut choice = GroupChoice::default();
+        let mut choice = StageChoice::default();
         // The model sends them: they go, whatever was measured.
         assert_eq!(choice.workers(1, 1, 10), 1);
         // Nothing measured yet: the first "stay" is a probe.
@@ -352,7 +355,7 @@ mod tests {
         // Out measured slower than home: home, until the next probe.
         choice.record(true, 1e-3, 9e-3);
         choice.record(true, 1e-3, 9e-3);
-        for _ in 0..GROUP_PROBE_EVERY {
+        for _ in 0..PROBE_EVERY {
             assert_eq!(choice.workers(0, 1, 10), 0);
             choice.record(false, 1e-3, 2e-3);
         }

@@ -142,8 +142,10 @@ pub struct Distribution {
     pub groups_local: u64,
     /// Of `groups_distributed`, the steps the cost model would have kept on
     /// rank 0 and the measured times (or a probe) sent out
-    /// (`cluster::schedule::GroupChoice`).
+    /// (`cluster::schedule::StageChoice`).
     pub groups_by_measure: u64,
+    /// Of `solve_distributed`, the same for the island solves.
+    pub solves_by_measure: u64,
     /// Groups too large to share out whole whose first stage went out in
     /// ranges of their pairs before they stepped (`PreparePairs`).
     pub groups_prepared: u64,
