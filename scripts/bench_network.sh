@@ -19,6 +19,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
+source scripts/crowd.sh
 
 tiny=${TINY:-0}
 [ "${1:-}" = "--tiny" ] && tiny=1
@@ -52,8 +53,7 @@ started=$(date +%s)
 scene() { # bodies: the bundled pour with that many bodies, no render section
   local f="$tmp/nb$1.toml"
   if [ "$1" = 200 ]; then
-    sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
-        -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml >"$f"
+    crowd_of 200 >"$f"
   else
     sed -e "s/^count = 20/count = $1/" -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml >"$f"
   fi

@@ -184,16 +184,13 @@ done <"$work/cases.txt"
 
 # 2. Pours: scripts/stress.sh's `crowd` scenes (the bundled nuts and bolts,
 # scatter box widened), every engine for the same simulated span.
-crowd() { # count half_width top
-  sed -e "s/^count = 20/count = $1/" -e "s/^min = .*/min = [-$2, -$2, 0.1]/" \
-      -e "s/^max = .*/max = [$2, $2, $3]/" -e "s/^until_rest = true/until_rest = false\nduration = $pour_time/" \
-      -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml
+source scripts/crowd.sh
+pour() { # count: its crowd, for the same simulated span in every engine
+  crowd_of "$1" | sed -e "s/^until_rest = true/until_rest = false\nduration = $pour_time/"
 }
 for count in ${counts//,/ }; do
   toml=$work/pour$count.toml
-  case $count in
-    200) crowd 200 0.35 1.0 ;; 1000) crowd 1000 0.55 1.6 ;; *) crowd "$count" 0.3 0.6 ;;
-  esac >"$toml"
+  pour "$count" >"$toml"
   bodies=$work/pour$count.json
   "$rigidsim" export "$toml" --to "$bodies"
   for engine in $pour_engines; do

@@ -39,19 +39,11 @@ if [ "${KEEP_RUNS:-0}" = 1 ]; then echo "bench_pour: runs kept in $tmp"; else tr
 source scripts/bench_builds.sh
 bench_builds
 
-# crowd COUNT HALF_WIDTH TOP: the bundled scene with its scatter box changed.
-crowd() {
-  sed -e "s/^count = 20/count = $1/" -e "s/^min = .*/min = [-$2, -$2, 0.1]/" \
-      -e "s/^max = .*/max = [$2, $2, $3]/" -e "s/^max_duration = .*/max_duration = 60.0/" \
-      -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml
-}
+source scripts/crowd.sh
 manifest=$tmp/manifest.csv
 echo "series,bodies,ranks,variant,rep,dir" >"$manifest"
 for count in $COUNTS; do
-  case $count in
-    50) crowd 50 0.3 0.6 ;; 200) crowd 200 0.35 1.0 ;; 1000) crowd 1000 0.55 1.6 ;;
-    *) crowd "$count" 0.3 0.6 ;;
-  esac >"$tmp/crowd$count.toml"
+  crowd_of "$count" >"$tmp/crowd$count.toml"
   reps=$REPS; opts=("${extra[@]}")
   if [ "$count" -ge 1000 ]; then reps=$REPS_BIG; opts=(--duration "$BIG_DURATION"); fi
   for rep in $(seq 1 "$reps"); do

@@ -135,8 +135,8 @@ CORE_RANKS=${CORE_RANKS:-$(nproc)}
 # are the distributed work (POUR_DURATION seconds).
 pour_opts=(--duration "${POUR_DURATION:-2.0}")
 [ "$tiny" = 1 ] && pour_opts=()   # extra already holds --tiny's duration
-sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
-    -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml >"$tmp/crowd200.toml"
+source scripts/crowd.sh
+crowd_of 200 >"$tmp/crowd200.toml"
 for rep in $(seq 1 "$CORE_REPS"); do
   for r in $(printf '%s\n' 1 "$CORE_RANKS" | sort -un); do
     run cores 121 "$r" compute "$rep" bench/scenes/eight_stacks.toml --no-render --no-sleep

@@ -25,9 +25,8 @@ trap 'rm -rf "$tmp"' EXIT
 source scripts/bench_builds.sh
 bench_builds
 
-sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
-    -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' \
-    scenes/nuts_and_bolts.toml >"$tmp/crowd200.toml"
+source scripts/crowd.sh
+crowd_of 200 >"$tmp/crowd200.toml"
 for rep in $(seq 1 "$REPS"); do
   for label in "${labels[@]}"; do
     for np in 1 2; do

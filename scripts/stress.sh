@@ -204,20 +204,19 @@ run_case long_resting_stack "$s/stack10.toml" 10 --duration "$(dur 10000 100)" -
 
 # Crowds: nuts and bolts poured onto the 2 m floor cube, and into a box,
 # until every body rests or has fallen off (the thesis scene's shapes).
-crowd() { # count half_width top [box]
-  sed -e "s/^count = 20/count = $1/" -e "s/^min = .*/min = [-$2, -$2, 0.1]/" \
-      -e "s/^max = .*/max = [$2, $2, $3]/" -e "s/^max_duration = .*/max_duration = 60.0/" \
-      -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml
-  if [ "${4:-}" = box ]; then
+source scripts/crowd.sh
+crowd_in() { # count [box]
+  crowd_of "$1"
+  if [ "${2:-}" = box ]; then
     printf '[objects.wall]\nshape = { box = { half_extents = [0.02, 0.62, 0.25] } }\nmass = 1.0\nrestitution = 0.5\nfriction = 0.5\n'
     printf '[objects.wall_y]\nshape = { box = { half_extents = [0.6, 0.02, 0.25] } }\nmass = 1.0\nrestitution = 0.5\nfriction = 0.5\n'
     body wall -0.62 0.0 0.25 "fixed = true"; body wall 0.62 0.0 0.25 "fixed = true"
     body wall_y 0.0 -0.62 0.25 "fixed = true"; body wall_y 0.0 0.62 0.25 "fixed = true"
   fi
 }
-crowd 200 0.35 1.0 >"$s/crowd200.toml"
-crowd 200 0.35 1.0 box >"$s/crowd200_box.toml"
-crowd 1000 0.55 1.6 >"$s/crowd1000.toml"
+crowd_in 200 >"$s/crowd200.toml"
+crowd_in 200 box >"$s/crowd200_box.toml"
+crowd_in 1000 >"$s/crowd1000.toml"
 run_case crowd200_floor "$s/crowd200.toml" 1 --sample-every 0.5 $( [ "$quick" = 1 ] && echo --duration 2 )
 run_case crowd200_box "$s/crowd200_box.toml" 1 --sample-every 0.5 $( [ "$quick" = 1 ] && echo --duration 2 )
 # 1000 bodies run to rest in about 10 minutes on one core (4.3 s simulated at

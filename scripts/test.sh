@@ -53,8 +53,8 @@ check "replay page in headless chromium" bash -c "$bin scenes/render_check.toml 
 # trajectory written so far is kept, and the lab leaves nothing behind.
 if why=$(bash scripts/lab.sh --check 2>&1); then
   lab() { bash scripts/lab.sh --name rsci "$@"; }
-  sed -e "s/^count = 20/count = 200/" -e "s/^min = .*/min = [-0.35, -0.35, 0.1]/" \
-      -e "s/^max = .*/max = [0.35, 0.35, 1.0]/" -e '/^\[render\]/,$d' scenes/nuts_and_bolts.toml >"$tmp/crowd200.toml"
+  source scripts/crowd.sh
+  crowd_of 200 >"$tmp/crowd200.toml"
   lab --hosts 2 --link 100mbit scenes/nuts_and_bolts.toml --force-distribute --no-render --no-progress \
     --duration 1.0 --out "$tmp/lab2" >"$tmp/lab2.log" 2>&1 || true
   same_as_one_rank() { # the 2-PC run's hash is det1's; ranks on pc1 and pc2; bytes crossed the link
