@@ -12,11 +12,15 @@
 //! through a body that moves; a stack's block is banded, a pile's sparse.
 
 use super::solver::Row;
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Mat, Side};
+use faer::{Conj, MatMut, Par, Side};
 use std::cell::RefCell;
+use std::rc::Rc;
 
 /// Each body's rows, counting only bodies an impulse moves (a fixed body's
 /// rows do not couple through it).
@@ -88,10 +92,8 @@ pub(super) fn free_block_step(
         row_ptr.push(cols.len());
     }
     let block = LowerBlock::from_rows(n, &row_ptr, &cols, &vals);
-    let factor = block.factor()?;
-    let mut step = Mat::<f64>::from_fn(n, 1, |k, _| -residual[k]);
-    factor.solve_in_place(&mut step);
-    let step: Vec<f64> = (0..n).map(|k| step[(k, 0)]).collect();
+    let mut step: Vec<f64> = residual.iter().map(|r| -r).collect();
+    block.solve_in_place(&mut step)?;
     step.iter().all(|x| x.is_finite()).then_some(step)
 }
 
@@ -132,6 +134,18 @@ struct LowerBlock {
 /// How many symbolic factorisations each thread keeps.
 const SYMBOLIC_KEPT: usize = 4;
 
+/// faer factors a block by dense supernodes where its flops per factor
+/// entry exceed 40 times this (its default, 1.0, keeps every block here
+/// simplicial). At 0.5 the pyramid's blocks (each cube's rows coupled with
+/// the two cubes below it and the two above) go supernodal, and its solves
+/// take 0.69 of the time; the stacks' banded blocks (20, 50, 100 cubes)
+/// stay simplicial, their answers unchanged to the bit. At 0.25 some of
+/// the stack of 100's go supernodal too.
+const SUPERNODAL_THRESHOLD: SupernodalThreshold = SupernodalThreshold(0.5);
+
+/// A kept symbolic factorisation and its pattern (column pointers, rows).
+type KeptSymbolic = (Vec<usize>, Vec<usize>, Rc<SymbolicCholesky<usize>>);
+
 thread_local! {
     /// The symbolic factorisations (fill-reducing order, elimination tree)
     /// of the latest free blocks, by their pattern. A resting stack's or
@@ -140,7 +154,7 @@ thread_local! {
     /// (the stack of 50: 15 % of the run against 11 %). The symbolic
     /// factorisation is a function of the pattern alone, so a kept one
     /// gives the same factor to the last bit.
-    static SYMBOLIC: RefCell<Vec<(Vec<usize>, Vec<usize>, SymbolicLlt<usize>)>> =
+    static SYMBOLIC: RefCell<Vec<KeptSymbolic>> =
         const { RefCell::new(Vec::new()) };
 }
 
@@ -175,9 +189,10 @@ impl LowerBlock {
         }
     }
 
-    /// Its Cholesky factor, with a kept symbolic factorisation where one
-    /// has this pattern. None where it fails.
-    fn factor(&self) -> Option<Llt<usize, f64>> {
+    /// Solves the block's system in place on `x` (the right-hand side in,
+    /// the answer out) by its Cholesky factor, with a kept symbolic
+    /// factorisation where one has this pattern. None where it fails.
+    fn solve_in_place(&self, x: &mut [f64]) -> Option<()> {
         let pattern =
             SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
         let kept = SYMBOLIC.with(|kept| {
@@ -189,7 +204,14 @@ impl LowerBlock {
         let symbolic = match kept {
             Some(s) => s,
             None => {
-                let s = SymbolicLlt::try_new(pattern, Side::Lower).ok()?;
+                let params = CholeskySymbolicParams {
+                    supernodal_flop_ratio_threshold: SUPERNODAL_THRESHOLD,
+                    ..Default::default()
+                };
+                let s = Rc::new(
+                    factorize_symbolic_cholesky(pattern, Side::Lower, SymmetricOrdering::Amd, params)
+                        .ok()?,
+                );
                 SYMBOLIC.with(|kept| {
                     let mut kept = kept.borrow_mut();
                     if kept.len() == SYMBOLIC_KEPT {
@@ -201,6 +223,26 @@ impl LowerBlock {
             }
         };
         let matrix = SparseColMatRef::new(pattern, &self.values);
-        Llt::try_new_with_symbolic(symbolic, matrix, Side::Lower).ok()
+        let mut factor = vec![0.0; symbolic.len_val()];
+        let mut work = MemBuffer::try_new(
+            symbolic
+                .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
+                .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq)),
+        )
+        .ok()?;
+        let llt = symbolic
+            .factorize_numeric_llt(
+                &mut factor,
+                matrix,
+                Side::Lower,
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut work),
+                Default::default(),
+            )
+            .ok()?;
+        let rhs = MatMut::from_column_major_slice_mut(x, self.n, 1);
+        llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut work));
+        Some(())
     }
 }
