@@ -858,26 +858,21 @@ impl MpiExecutor<'_> {
             SELF_SCHEDULED_SHARE,
         );
         // Where measured times send the solves out, as for the group steps.
-        let workers = self.solve_choice.workers(
-            modelled,
-            self.workers_without_link(total),
-            tasks.len(),
-        );
+        let workers =
+            self.solve_choice
+                .workers(modelled, self.workers_without_link(total), tasks.len());
         if workers > 0 && modelled == 0 {
             self.dist.solves_by_measure += 1;
         }
         let started = Instant::now();
-        let predicted = total;
         if workers == 0 {
             self.dist.solve_local += 1;
-            let clock = Instant::now();
             let r: Vec<IslandResult> = tasks.iter().map(solver::solve_island).collect();
-            let s = clock.elapsed().as_secs_f64();
+            let s = started.elapsed().as_secs_f64();
             self.model.calibrate_islands(units.iter().sum(), s);
             self.book[0].busy_s += s;
             self.book[0].tasks_is += tasks.len() as u64;
-            self.solve_choice
-                .record(false, predicted, started.elapsed().as_secs_f64());
+            self.solve_choice.record(false, total, s);
             return r;
         }
         self.dist.solve_distributed += 1;
@@ -895,7 +890,7 @@ impl MpiExecutor<'_> {
         self.model.calibrate_islands(units.iter().sum(), total_busy);
         self.book[0].tasks_is += own_tasks.len() as u64;
         self.solve_choice
-            .record(true, predicted, started.elapsed().as_secs_f64());
+            .record(true, total, started.elapsed().as_secs_f64());
         results
     }
 
@@ -907,8 +902,13 @@ impl MpiExecutor<'_> {
         if self.roles.workers.is_empty() {
             0
         } else {
-            schedule::workers_to_use(estimated_s, &self.speeds, SELF_SCHEDULED_SHARE, self.latency_s)
-                .max(1)
+            schedule::workers_to_use(
+                estimated_s,
+                &self.speeds,
+                SELF_SCHEDULED_SHARE,
+                self.latency_s,
+            )
+            .max(1)
         }
     }
 

@@ -71,13 +71,12 @@ pub(super) fn free_block_step(
         // Each body's rows are in row order, and so in block order: the two
         // bodies' lists merge into one ascending list.
         let (moves_a, moves_b) = rows[i].moves();
-        let of = |body: usize, moves: bool| -> &[usize] {
-            if moves { &by_body[body] } else { &[] }
-        };
+        let of =
+            |body: usize, moves: bool| -> &[usize] { if moves { &by_body[body] } else { &[] } };
         merge_below(
             &mut neighbours,
             of(rows[i].a, moves_a),
-            of(rows[i].b, moves_b && rows[i].b != rows[i].a),
+            of(rows[i].b, moves_b),
             &position,
             k,
         );
@@ -193,8 +192,13 @@ impl LowerBlock {
     /// the answer out) by its Cholesky factor, with a kept symbolic
     /// factorisation where one has this pattern. None where it fails.
     fn solve_in_place(&self, x: &mut [f64]) -> Option<()> {
-        let pattern =
-            SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
+        let pattern = SymbolicSparseColMatRef::new_checked(
+            self.n,
+            self.n,
+            &self.col_ptr,
+            None,
+            &self.row_idx,
+        );
         let kept = SYMBOLIC.with(|kept| {
             kept.borrow()
                 .iter()
@@ -209,8 +213,13 @@ impl LowerBlock {
                     ..Default::default()
                 };
                 let s = Rc::new(
-                    factorize_symbolic_cholesky(pattern, Side::Lower, SymmetricOrdering::Amd, params)
-                        .ok()?,
+                    factorize_symbolic_cholesky(
+                        pattern,
+                        Side::Lower,
+                        SymmetricOrdering::Amd,
+                        params,
+                    )
+                    .ok()?,
                 );
                 SYMBOLIC.with(|kept| {
                     let mut kept = kept.borrow_mut();
