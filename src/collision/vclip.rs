@@ -939,15 +939,30 @@ pub fn separating_axis(
 
     let mut best_edge = (f64::NEG_INFINITY, Vector3::zeros(), AxisKind::Edges(0, 0));
     let ca = a.centroid();
+    // Each B edge's arc b1→b2 on the Gauss map of −B and its plane's
+    // normal, once per call instead of once per edge pair.
+    let b_arcs: Vec<GaussArc> = b
+        .edges()
+        .iter()
+        .map(|eb| GaussArc::new(-bn[eb.left as usize], -bn[eb.right as usize]))
+        .collect();
+    // Which side of the current A arc's plane each face normal of −B lies
+    // on (b·n_a): one product per face of B, then two look-ups per edge
+    // pair reject the arcs that cannot cross, which is nearly all of them.
+    let mut side = vec![0.0; bn.len()];
     for (i, ea) in a.edges().iter().enumerate() {
-        let a1 = a.faces()[ea.left as usize].normal;
-        let a2 = a.faces()[ea.right as usize].normal;
+        let arc_a = GaussArc::new(
+            a.faces()[ea.left as usize].normal,
+            a.faces()[ea.right as usize].normal,
+        );
+        for (s, n) in side.iter_mut().zip(&bn) {
+            *s = (-n).dot(&arc_a.normal);
+        }
         let ua = a.edge_direction(i);
         let pa = a.vertices()[ea.tail as usize];
         for (j, eb) in b.edges().iter().enumerate() {
-            let b1 = -bn[eb.left as usize];
-            let b2 = -bn[eb.right as usize];
-            if !arcs_cross(&a1, &a2, &b1, &b2) {
+            let (b1a, b2a) = (side[eb.left as usize], side[eb.right as usize]);
+            if b1a * b2a >= 0.0 || !arc_a.crosses(&b_arcs[j], b1a, b2a) {
                 continue;
             }
             let ub = b_to_a.rotation * b.edge_direction(j);
@@ -998,21 +1013,36 @@ pub fn separating_axis(
     }
 }
 
-/// Do the great arcs a1→a2 and b1→b2 (each shorter than π) cross?
-/// b1, b2 must lie on opposite sides of the plane of arc a and a1, a2 on
-/// opposite sides of the plane of arc b; the arc-b point on circle a,
-/// r ∝ b1 |b2·n_a| + b2 |b1·n_a|, must then be the crossing on arc a
-/// rather than its antipode, i.e. lie on the side of a1 + a2.
-fn arcs_cross(a1: &Vector3<f64>, a2: &Vector3<f64>, b1: &Vector3<f64>, b2: &Vector3<f64>) -> bool {
-    let na = a1.cross(a2);
-    let nb = b1.cross(b2);
-    let (b1a, b2a) = (b1.dot(&na), b2.dot(&na));
-    let (a1b, a2b) = (a1.dot(&nb), a2.dot(&nb));
-    if b1a * b2a >= 0.0 || a1b * a2b >= 0.0 {
-        return false;
+/// A great arc a1→a2 (shorter than π) on a Gauss map, with the normal
+/// of its plane.
+struct GaussArc {
+    from: Vector3<f64>,
+    to: Vector3<f64>,
+    normal: Vector3<f64>,
+}
+
+impl GaussArc {
+    fn new(from: Vector3<f64>, to: Vector3<f64>) -> GaussArc {
+        GaussArc {
+            from,
+            to,
+            normal: from.cross(&to),
+        }
     }
-    let mid = a1 + a2;
-    b1.dot(&mid) * b2a.abs() + b2.dot(&mid) * b1a.abs() > 0.0
+
+    /// Does this arc a cross the arc b, given b's ends' products with this
+    /// arc's plane normal (b1·n_a, b2·n_a), of opposite signs? a1, a2 must
+    /// also lie on opposite sides of the plane of arc b; the arc-b point on
+    /// circle a, r ∝ b1 |b2·n_a| + b2 |b1·n_a|, must then be the crossing on
+    /// arc a rather than its antipode, i.e. lie on the side of a1 + a2.
+    fn crosses(&self, b: &GaussArc, b1a: f64, b2a: f64) -> bool {
+        let (a1b, a2b) = (self.from.dot(&b.normal), self.to.dot(&b.normal));
+        if a1b * a2b >= 0.0 {
+            return false;
+        }
+        let mid = self.from + self.to;
+        b.from.dot(&mid) * b2a.abs() + b.to.dot(&mid) * b1a.abs() > 0.0
+    }
 }
 
 /// The fallback: exact by exhaustion. Penetration from the separating-axis
