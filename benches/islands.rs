@@ -7,7 +7,9 @@
 //! solves there (see `step::capture`); `tests/data/islands/` holds a few.
 //!
 //! Run: `cargo bench --bench islands -- [DIR]` (default `tests/data/islands`);
-//! prints a line per size class and the totals. With `ISLANDS_CSV=1`, also
+//! prints a line per size class, the totals, and a line per path the
+//! solves took (`PATHS`: which solver decided, and whether it met the LCP's
+//! conditions), with its share of the time. With `ISLANDS_CSV=1`, also
 //! a line per island on stderr: `csv,contacts,rows,seconds,iterative
 //! solves,unconverged,sweeps,lcp solves,pivots,compliant,failed,worst
 //! violation` (the island's two solves, impact and resting, together).
@@ -50,6 +52,11 @@ fn main() {
     // Islands whose answer misses the LCP conditions by more than the
     // iterative tolerance's floor (1e-8 m/s).
     let mut missed = 0;
+    // Per path (`PATHS`): islands, seconds, their stats.
+    let mut by_path: Vec<(usize, f64, SolveStats)> = PATHS
+        .iter()
+        .map(|_| (0, 0.0, SolveStats::default()))
+        .collect();
     let start = Instant::now();
     for task in &tasks {
         let t = Instant::now();
@@ -78,6 +85,10 @@ fn main() {
             );
         }
         missed += usize::from(r.stats.worst_violation > 1e-8);
+        let p = path_of(&r.stats);
+        by_path[p].0 += 1;
+        by_path[p].1 += s;
+        by_path[p].2.add(&r.stats);
         total.add(&r.stats);
     }
     let wall = start.elapsed().as_secs_f64();
@@ -110,4 +121,55 @@ fn main() {
         total.failed,
         total.worst_violation
     );
+    let seconds: f64 = by_path.iter().map(|p| p.1).sum();
+    println!(
+        "{:<56} {:>8} {:>10} {:>6} {:>9} {:>8}",
+        "what decided the island (impact and resting solve together)",
+        "islands",
+        "seconds",
+        "share",
+        "pivots",
+        "sweeps"
+    );
+    for (name, (n, s, st)) in PATHS.iter().zip(&by_path) {
+        if *n > 0 {
+            println!(
+                "{name:<56} {n:>8} {s:>10.3} {:>5.0}% {:>9} {:>8}",
+                100.0 * s / seconds.max(1e-300),
+                st.pivots,
+                st.iterative_sweeps
+            );
+        }
+    }
+}
+
+/// The paths an island's solves can take (`solve_phase`), most telling
+/// first: an island is counted under the first that applies to either of
+/// its two solves.
+const PATHS: [&str; 7] = [
+    "failed (fallback answer)",
+    "sequential impulses unconverged, then Dantzig",
+    "sequential impulses unconverged, kept (400 rows and more)",
+    "sequential impulses converged",
+    "Dantzig failed, sequential impulses met the conditions",
+    "Dantzig after its compliant retry",
+    "Dantzig's method only",
+];
+
+fn path_of(st: &SolveStats) -> usize {
+    if st.failed > 0 {
+        0
+    } else if st.iterative_solves > 0 && st.lcp_solves > 0 {
+        1
+    } else if st.iterative_unconverged > 0 {
+        2
+    } else if st.iterative_solves > 0 {
+        3
+    } else if st.iterative_rescues > 0 {
+        4
+    } else if st.compliant_solves > 0 {
+        5
+    } else {
+        6
+    }
 }
