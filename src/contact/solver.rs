@@ -706,10 +706,8 @@ fn solve_phase(
     // subspace step on the rows, no dense matrix (see `ITERATIVE_MIN_ROWS`).
     // An answer that misses the conditions is handed to Dantzig's method
     // below `DANTZIG_MAX_ROWS`, and kept if that fails too.
-    let mut unconverged = None;
-    if m >= task.iterative_min_rows as usize {
-        stats.iterative_solves += 1;
-        let (p, met, sweeps) = sequential_impulses(
+    let sweeps_of = |max_sweeps| {
+        sequential_impulses(
             &rows,
             &diag,
             &rhs,
@@ -718,8 +716,13 @@ fn solve_phase(
             &findex,
             &warm,
             v.len(),
-            ITERATIVE_SWEEPS,
-        );
+            max_sweeps,
+        )
+    };
+    let mut unconverged = None;
+    if m >= task.iterative_min_rows as usize {
+        stats.iterative_solves += 1;
+        let (p, met, sweeps) = sweeps_of(ITERATIVE_SWEEPS);
         stats.iterative_sweeps += sweeps as u64;
         if !met {
             stats.iterative_unconverged += 1;
@@ -744,17 +747,7 @@ fn solve_phase(
         && m < task.iterative_min_rows as usize
         && !warm_close())
     .then(|| {
-        let (p, met, sweeps) = sequential_impulses(
-            &rows,
-            &diag,
-            &rhs,
-            &lo,
-            &hi,
-            &findex,
-            &warm,
-            v.len(),
-            START_SWEEPS,
-        );
+        let (p, met, sweeps) = sweeps_of(START_SWEEPS);
         stats.iterative_sweeps += sweeps as u64;
         (p, met)
     });
@@ -832,17 +825,7 @@ fn solve_phase(
                 .then(|| match swept.clone() {
                     // The start sweeps' answer, where it met the conditions.
                     Some((p, met)) => (p, met, 0),
-                    None => sequential_impulses(
-                        &rows,
-                        &diag,
-                        &rhs,
-                        &lo,
-                        &hi,
-                        &findex,
-                        &warm,
-                        v.len(),
-                        ITERATIVE_SWEEPS,
-                    ),
+                    None => sweeps_of(ITERATIVE_SWEEPS),
                 })
                 .inspect(|&(_, _, sweeps)| stats.iterative_sweeps += sweeps as u64)
                 .filter(|&(_, met, _)| met)
@@ -1447,36 +1430,33 @@ impl<'a> IterativeSystem<'a> {
     /// to `tolerance`: w ≥ 0 at a lower bound, w ≤ 0 at an upper one, w = 0
     /// between.
     fn met(&self, s: &IterativeState) -> bool {
-        (0..self.rows.len()).all(|i| {
-            if self.diag[i] <= 1e-300 {
-                return true;
-            }
-            let wi = self.velocity(i, s);
-            let (l, h) = self.bounds(i, &s.p);
-            match (s.p[i] <= l, s.p[i] >= h) {
-                (true, true) => true,
-                (true, false) => wi >= -self.tolerance,
-                (false, true) => wi <= self.tolerance,
-                (false, false) => wi.abs() <= self.tolerance,
-            }
-        })
+        (0..self.rows.len()).all(|i| self.miss(i, s) <= self.tolerance)
     }
 
     /// The largest amount by which a row misses its condition (m/s).
     fn worst_miss(&self, s: &IterativeState) -> f64 {
         (0..self.rows.len())
-            .filter(|&i| self.diag[i] > 1e-300)
-            .map(|i| {
-                let wi = self.velocity(i, s);
-                let (l, h) = self.bounds(i, &s.p);
-                match (s.p[i] <= l, s.p[i] >= h) {
-                    (true, true) => 0.0,
-                    (true, false) => (-wi).max(0.0),
-                    (false, true) => wi.max(0.0),
-                    (false, false) => wi.abs(),
-                }
-            })
+            .map(|i| self.miss(i, s))
             .fold(0.0, f64::max)
+    }
+
+    /// How far (m/s) row i misses its condition: w_i below 0 at its lower
+    /// bound, above 0 at its upper one, off 0 between; zero for a row no
+    /// impulse moves. NaN where w_i is (so that `met` fails on it).
+    fn miss(&self, i: usize, s: &IterativeState) -> f64 {
+        if self.diag[i] <= 1e-300 {
+            return 0.0;
+        }
+        let wi = self.velocity(i, s);
+        let (l, h) = self.bounds(i, &s.p);
+        match (s.p[i] <= l, s.p[i] >= h) {
+            (true, true) => 0.0,
+            (true, false) if wi >= 0.0 => 0.0,
+            (true, false) => -wi,
+            (false, true) if wi <= 0.0 => 0.0,
+            (false, true) => wi,
+            (false, false) => wi.abs(),
+        }
     }
 
     /// How far p is from meeting them, in velocity: the squared length of
