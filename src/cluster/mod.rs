@@ -182,8 +182,10 @@ const COORDINATOR_SHARE: f64 = 0.5;
 /// while the workers work through theirs (`self_schedule`), so it counts at
 /// full speed.
 const SELF_SCHEDULED_SHARE: f64 = 1.0;
-/// Chunks of group steps a worker holds at most: the one it steps and the
-/// next, so it never waits for rank 0 between them.
+/// Chunks of group steps a worker holds at most. Two (the one it steps and
+/// the next, so that it never waits for rank 0 between them) commit the
+/// second chunk while little is known of the first: on the 200-body pour
+/// two ranks took 2.68 s against 2.38 s with one (medians of 5, alternating).
 const CHUNKS_IN_FLIGHT: usize = 1;
 /// A chunk holds at least this share of the work not yet handed out, times
 /// the worker's share of the speed of the ranks taking part (guided

@@ -166,7 +166,10 @@ impl TrajectoryWriter {
         let shared = Arc::clone(&failed);
         let thread = std::thread::Builder::new()
             .name("trajectory".into())
-            .spawn(move || out.serve(jobs, flushed_tx, shared))
+            .spawn(move || {
+                free_of_the_rank_binding();
+                out.serve(jobs, flushed_tx, shared)
+            })
             .expect("spawn the trajectory writer thread");
         TrajectoryWriter {
             rows: Some(rows),
@@ -327,3 +330,29 @@ fn check_prefix(file: &std::fs::File, mark: TrajectoryMark) -> std::io::Result<(
     }
     Ok(())
 }
+
+/// Lets the calling thread run on any online core. `mpirun` binds each rank
+/// to one core (Open MPI binds to cores for up to two processes), and a
+/// thread inherits its process's binding: the writer thread then took its
+/// turns on rank 0's own core, in the middle of the step it was meant to
+/// stay out of. Unbound, it runs wherever a core is free. Best effort: on
+/// failure the thread keeps the binding it had.
+#[cfg(target_os = "linux")]
+fn free_of_the_rank_binding() {
+    // SAFETY: sysconf, and CPU_SET / sched_setaffinity on a zeroed
+    // cpu_set_t owned by this frame, for this thread (pid 0).
+    unsafe {
+        let online = libc::sysconf(libc::_SC_NPROCESSORS_ONLN);
+        if online <= 0 {
+            return;
+        }
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        for cpu in 0..(online as usize).min(libc::CPU_SETSIZE as usize) {
+            libc::CPU_SET(cpu, &mut set);
+        }
+        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn free_of_the_rank_binding() {}
