@@ -55,11 +55,27 @@ pub(super) fn free_block_step(
     if n == 0 {
         return None;
     }
-    // Position of each row in the free block.
+    // Each body's free rows by their position in the block, ascending
+    // (its rows are in row order, and so in block order), laid out flat:
+    // body b's are `free_of[start[b]..start[b + 1]]`.
     let mut position = vec![usize::MAX; rows.len()];
     for (k, &i) in free.iter().enumerate() {
         position[i] = k;
     }
+    let mut start = Vec::with_capacity(by_body.len() + 1);
+    let mut free_of = Vec::new();
+    start.push(0);
+    for list in by_body {
+        free_of.extend(list.iter().map(|&i| position[i]).filter(|&k| k != usize::MAX));
+        start.push(free_of.len());
+    }
+    let of = |body: usize, moves: bool| -> &[usize] {
+        if moves {
+            &free_of[start[body]..start[body + 1]]
+        } else {
+            &[]
+        }
+    };
     // Lower triangle, one entry per coupled pair (coupling sums over both
     // shared bodies, so a pair met through two bodies is entered once),
     // gathered row by row, then laid out by column (rows ascending).
@@ -68,16 +84,11 @@ pub(super) fn free_block_step(
     let (mut cols, mut vals) = (Vec::new(), Vec::new());
     let mut neighbours = Vec::new();
     for (k, &i) in free.iter().enumerate() {
-        // Each body's rows are in row order, and so in block order: the two
-        // bodies' lists merge into one ascending list.
         let (moves_a, moves_b) = rows[i].moves();
-        let of =
-            |body: usize, moves: bool| -> &[usize] { if moves { &by_body[body] } else { &[] } };
         merge_below(
             &mut neighbours,
             of(rows[i].a, moves_a),
             of(rows[i].b, moves_b),
-            &position,
             k,
         );
         for &l in &neighbours {
@@ -96,29 +107,21 @@ pub(super) fn free_block_step(
     step.iter().all(|x| x.is_finite()).then_some(step)
 }
 
-/// Into `out`: the block positions (`position`, `usize::MAX` for a row not
-/// in the block) of the rows listed in `a` and `b` (each in row order, so
-/// ascending in the block) that are at most `k`, ascending, each once.
-fn merge_below(out: &mut Vec<usize>, a: &[usize], b: &[usize], position: &[usize], k: usize) {
+/// Into `out`: the block positions listed in `a` and `b` (each ascending)
+/// that are at most `k`, ascending, each once.
+fn merge_below(out: &mut Vec<usize>, a: &[usize], b: &[usize], k: usize) {
     out.clear();
-    // The next position in the block at or after `x` in `list`, and where.
-    let next = |list: &[usize], mut x: usize| {
-        while x < list.len() && position[list[x]] == usize::MAX {
-            x += 1;
-        }
-        (list.get(x).map_or(usize::MAX, |&j| position[j]), x)
-    };
     let (mut x, mut y) = (0, 0);
     loop {
-        let (pa, xa) = next(a, x);
-        let (pb, yb) = next(b, y);
+        let pa = a.get(x).copied().unwrap_or(usize::MAX);
+        let pb = b.get(y).copied().unwrap_or(usize::MAX);
         let least = pa.min(pb);
         if least > k {
             break;
         }
         out.push(least);
-        x = xa + usize::from(pa == least);
-        y = yb + usize::from(pb == least);
+        x += usize::from(pa == least);
+        y += usize::from(pb == least);
     }
 }
 
