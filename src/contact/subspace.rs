@@ -78,7 +78,7 @@ pub(super) fn free_block_step(
     };
     // Lower triangle, one entry per coupled pair (coupling sums over both
     // shared bodies, so a pair met through two bodies is entered once),
-    // gathered row by row, then laid out by column (rows ascending).
+    // gathered row by row (columns ascending).
     let mut row_ptr = Vec::with_capacity(n + 1);
     row_ptr.push(0usize);
     let (mut cols, mut vals) = (Vec::new(), Vec::new());
@@ -101,7 +101,14 @@ pub(super) fn free_block_step(
         }
         row_ptr.push(cols.len());
     }
-    let block = LowerBlock::from_rows(n, &row_ptr, &cols, &vals);
+    // Row k's entries at and left of the diagonal are column k's at and
+    // above it: the rows as gathered are the upper triangle by columns.
+    let block = UpperBlock {
+        n,
+        col_ptr: row_ptr,
+        row_idx: cols,
+        values: vals,
+    };
     let mut step: Vec<f64> = residual.iter().map(|r| -r).collect();
     block.solve_in_place(&mut step)?;
     step.iter().all(|x| x.is_finite()).then_some(step)
@@ -125,8 +132,9 @@ fn merge_below(out: &mut Vec<usize>, a: &[usize], b: &[usize], k: usize) {
     }
 }
 
-/// The free block's lower triangle in compressed columns.
-struct LowerBlock {
+/// The free block's upper triangle in compressed columns (rows ascending
+/// in each column).
+struct UpperBlock {
     n: usize,
     col_ptr: Vec<usize>,
     row_idx: Vec<usize>,
@@ -160,37 +168,7 @@ thread_local! {
         const { RefCell::new(Vec::new()) };
 }
 
-impl LowerBlock {
-    /// From the entries listed row by row (`cols[row_ptr[k]..row_ptr[k+1]]`
-    /// ascending, all ≤ k): the same rows listed by column.
-    fn from_rows(n: usize, row_ptr: &[usize], cols: &[usize], vals: &[f64]) -> Self {
-        let mut col_ptr = vec![0usize; n + 1];
-        for &l in cols {
-            col_ptr[l + 1] += 1;
-        }
-        for l in 0..n {
-            col_ptr[l + 1] += col_ptr[l];
-        }
-        let mut next = col_ptr.clone();
-        let mut row_idx = vec![0usize; cols.len()];
-        let mut values = vec![0.0; cols.len()];
-        // Rows in ascending order, so each column's rows come out sorted.
-        for k in 0..n {
-            for e in row_ptr[k]..row_ptr[k + 1] {
-                let at = &mut next[cols[e]];
-                row_idx[*at] = k;
-                values[*at] = vals[e];
-                *at += 1;
-            }
-        }
-        LowerBlock {
-            n,
-            col_ptr,
-            row_idx,
-            values,
-        }
-    }
-
+impl UpperBlock {
     /// Solves the block's system in place on `x` (the right-hand side in,
     /// the answer out) by its Cholesky factor, with a kept symbolic
     /// factorisation where one has this pattern. None where it fails.
@@ -218,7 +196,7 @@ impl LowerBlock {
                 let s = Rc::new(
                     factorize_symbolic_cholesky(
                         pattern,
-                        Side::Lower,
+                        Side::Upper,
                         SymmetricOrdering::Amd,
                         params,
                     )
@@ -246,7 +224,7 @@ impl LowerBlock {
             .factorize_numeric_llt(
                 &mut factor,
                 matrix,
-                Side::Lower,
+                Side::Upper,
                 Default::default(),
                 Par::Seq,
                 MemStack::new(&mut work),
