@@ -15,7 +15,8 @@ use super::solver::Row;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky, simplicial, supernodal,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
@@ -153,8 +154,75 @@ const SYMBOLIC_KEPT: usize = 4;
 /// the stack of 100's go supernodal too.
 const SUPERNODAL_THRESHOLD: SupernodalThreshold = SupernodalThreshold(0.5);
 
-/// A kept symbolic factorisation and its pattern (column pointers, rows).
-type KeptSymbolic = (Vec<usize>, Vec<usize>, Rc<SymbolicCholesky<usize>>);
+/// A kept symbolic factorisation, the pattern it was made for (column
+/// pointers, rows) and that pattern in its fill-reducing order.
+struct KeptSymbolic {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    symbolic: Rc<SymbolicCholesky<usize>>,
+    permuted: Rc<Permuted>,
+}
+
+/// The block permuted into the symbolic factorisation's order, laid out
+/// as faer's numeric factorisation takes it (the triangle and the order
+/// of entries that `permute_self_adjoint_to_unsorted` gives): its pattern,
+/// and where each entry of the block as gathered lands in it. Moving the
+/// values there is all that the permutation then costs a factorisation,
+/// where faer would redo the layout each time (5 % of the pyramid's run),
+/// and the numeric factorisation reads exactly what it read before.
+struct Permuted {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    at: Vec<usize>,
+}
+
+impl Permuted {
+    /// The layout of `block` permuted for `symbolic`, found by permuting
+    /// each entry's own index as its value. None without a permutation.
+    fn new(block: &UpperBlock, symbolic: &SymbolicCholesky<usize>) -> Option<Permuted> {
+        let perm = symbolic.perm()?;
+        let n = block.n;
+        let nnz = block.values.len();
+        let out_side = match symbolic.raw() {
+            SymbolicCholeskyRaw::Simplicial(_) => Side::Upper,
+            SymbolicCholeskyRaw::Supernodal(_) => Side::Lower,
+        };
+        let index: Vec<f64> = (0..nnz).map(|e| e as f64).collect();
+        let mut moved = vec![0.0; nnz];
+        let mut col_ptr = vec![0usize; n + 1];
+        let mut row_idx = vec![0usize; nnz];
+        let pattern = SymbolicSparseColMatRef::new_checked(
+            n,
+            n,
+            &block.col_ptr,
+            None,
+            &block.row_idx,
+        );
+        let mut work = MemBuffer::try_new(faer::sparse::utils::permute_self_adjoint_scratch::<
+            usize,
+        >(n))
+        .ok()?;
+        faer::sparse::utils::permute_self_adjoint_to_unsorted(
+            &mut moved,
+            &mut col_ptr,
+            &mut row_idx,
+            SparseColMatRef::new(pattern, &index),
+            perm,
+            Side::Upper,
+            out_side,
+            MemStack::new(&mut work),
+        );
+        let mut at = vec![usize::MAX; nnz];
+        for (position, &e) in moved.iter().enumerate() {
+            at[e as usize] = position;
+        }
+        at.iter().all(|&p| p != usize::MAX).then_some(Permuted {
+            col_ptr,
+            row_idx,
+            at,
+        })
+    }
+}
 
 thread_local! {
     /// The symbolic factorisations (fill-reducing order, elimination tree)
@@ -173,22 +241,22 @@ impl UpperBlock {
     /// the answer out) by its Cholesky factor, with a kept symbolic
     /// factorisation where one has this pattern. None where it fails.
     fn solve_in_place(&self, x: &mut [f64]) -> Option<()> {
-        let pattern = SymbolicSparseColMatRef::new_checked(
-            self.n,
-            self.n,
-            &self.col_ptr,
-            None,
-            &self.row_idx,
-        );
         let kept = SYMBOLIC.with(|kept| {
             kept.borrow()
                 .iter()
-                .find(|(c, r, _)| *c == self.col_ptr && *r == self.row_idx)
-                .map(|(_, _, s)| s.clone())
+                .find(|k| k.col_ptr == self.col_ptr && k.row_idx == self.row_idx)
+                .map(|k| (k.symbolic.clone(), k.permuted.clone()))
         });
-        let symbolic = match kept {
+        let (symbolic, permuted) = match kept {
             Some(s) => s,
             None => {
+                let pattern = SymbolicSparseColMatRef::new_checked(
+                    self.n,
+                    self.n,
+                    &self.col_ptr,
+                    None,
+                    &self.row_idx,
+                );
                 let params = CholeskySymbolicParams {
                     supernodal_flop_ratio_threshold: SUPERNODAL_THRESHOLD,
                     ..Default::default()
@@ -202,17 +270,36 @@ impl UpperBlock {
                     )
                     .ok()?,
                 );
+                let p = Rc::new(Permuted::new(self, &s)?);
                 SYMBOLIC.with(|kept| {
                     let mut kept = kept.borrow_mut();
                     if kept.len() == SYMBOLIC_KEPT {
                         kept.remove(0);
                     }
-                    kept.push((self.col_ptr.clone(), self.row_idx.clone(), s.clone()));
+                    kept.push(KeptSymbolic {
+                        col_ptr: self.col_ptr.clone(),
+                        row_idx: self.row_idx.clone(),
+                        symbolic: s.clone(),
+                        permuted: p.clone(),
+                    });
                 });
-                s
+                (s, p)
             }
         };
-        let matrix = SparseColMatRef::new(pattern, &self.values);
+        let mut values = vec![0.0; permuted.at.len()];
+        for (&at, &v) in permuted.at.iter().zip(&self.values) {
+            values[at] = v;
+        }
+        let matrix = SparseColMatRef::new(
+            SymbolicSparseColMatRef::new_unsorted_checked(
+                self.n,
+                self.n,
+                &permuted.col_ptr,
+                None,
+                &permuted.row_idx,
+            ),
+            &values,
+        );
         let mut factor = vec![0.0; symbolic.len_val()];
         let mut work = MemBuffer::try_new(
             symbolic
@@ -220,17 +307,28 @@ impl UpperBlock {
                 .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq)),
         )
         .ok()?;
-        let llt = symbolic
-            .factorize_numeric_llt(
+        let stack = MemStack::new(&mut work);
+        match symbolic.raw() {
+            SymbolicCholeskyRaw::Simplicial(s) => simplicial::factorize_simplicial_numeric_llt(
                 &mut factor,
                 matrix,
-                Side::Upper,
                 Default::default(),
+                s,
+                stack,
+            )
+            .ok()?,
+            SymbolicCholeskyRaw::Supernodal(s) => supernodal::factorize_supernodal_numeric_llt(
+                &mut factor,
+                matrix,
+                Default::default(),
+                s,
                 Par::Seq,
-                MemStack::new(&mut work),
+                stack,
                 Default::default(),
             )
-            .ok()?;
+            .ok()?,
+        };
+        let llt = LltRef::new(&symbolic, &factor);
         let rhs = MatMut::from_column_major_slice_mut(x, self.n, 1);
         llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut work));
         Some(())
