@@ -918,21 +918,13 @@ pub fn separating_axis(
     for (j, face) in b.faces().iter().enumerate() {
         let n = bn[j];
         let off = n.dot(&bv[face.vertices[0]]);
-        let min_a = a
-            .vertices()
-            .iter()
-            .map(|x| n.dot(x))
-            .fold(f64::INFINITY, f64::min);
-        let sep = min_a - off;
-        if sep > best_face.0 {
+        if let Some(sep) = separation_beyond(a.vertices(), &n, off, best_face.0) {
             best_face = (sep, n, AxisKind::FaceB(j as u32));
         }
     }
     for (i, face) in a.faces().iter().enumerate() {
         let m = face.normal;
-        let min_b = bv.iter().map(|y| m.dot(y)).fold(f64::INFINITY, f64::min);
-        let sep = min_b - face.offset;
-        if sep > best_face.0 {
+        if let Some(sep) = separation_beyond(&bv, &m, face.offset, best_face.0) {
             best_face = (sep, -m, AxisKind::FaceA(i as u32));
         }
     }
@@ -1011,6 +1003,27 @@ pub fn separating_axis(
             _ => None,
         },
     }
+}
+
+/// `min over points of n·x − offset` where it exceeds `best`, else None.
+/// A face axis that cannot beat the best one so far is left as soon as
+/// one point shows it (most do at once); the minimum is exact whatever the
+/// order, so an axis that can is found with the same separation as by a
+/// full scan.
+fn separation_beyond(
+    points: &[Vector3<f64>],
+    n: &Vector3<f64>,
+    offset: f64,
+    best: f64,
+) -> Option<f64> {
+    let mut least = f64::INFINITY;
+    for x in points {
+        least = least.min(n.dot(x));
+        if least - offset <= best {
+            return None;
+        }
+    }
+    Some(least - offset)
 }
 
 /// A great arc a1→a2 (shorter than π) on a Gauss map, with the normal
