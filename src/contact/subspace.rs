@@ -67,7 +67,11 @@ pub(super) fn free_block_step(
     let mut free_of = Vec::new();
     start.push(0);
     for list in by_body {
-        free_of.extend(list.iter().map(|&i| position[i]).filter(|&k| k != usize::MAX));
+        free_of.extend(
+            list.iter()
+                .map(|&i| position[i])
+                .filter(|&k| k != usize::MAX),
+        );
         start.push(free_of.len());
     }
     let of = |body: usize, moves: bool| -> &[usize] {
@@ -191,16 +195,11 @@ impl Permuted {
         let mut moved = vec![0.0; nnz];
         let mut col_ptr = vec![0usize; n + 1];
         let mut row_idx = vec![0usize; nnz];
-        let pattern = SymbolicSparseColMatRef::new_checked(
-            n,
-            n,
-            &block.col_ptr,
-            None,
-            &block.row_idx,
-        );
-        let mut work = MemBuffer::try_new(faer::sparse::utils::permute_self_adjoint_scratch::<
-            usize,
-        >(n))
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(n, n, &block.col_ptr, None, &block.row_idx);
+        let mut work = MemBuffer::try_new(
+            faer::sparse::utils::permute_self_adjoint_scratch::<usize>(n),
+        )
         .ok()?;
         faer::sparse::utils::permute_self_adjoint_to_unsorted(
             &mut moved,

@@ -89,16 +89,17 @@ impl Region<'_> {
         let start = seg[a].time.max(seg[b].time);
         let since = since.get(&k).copied();
         let end_overlaps = self.overlaps_more((a, b), r, h, seg, since);
-        let interval = match self.first_overlap_sample(a, b, seg, start, h, since, end_overlaps) {
-            Sampled::Slow if end_overlaps => Some((start, h, None, None)),
-            Sampled::Slow | Sampled::Apart => None,
-            Sampled::Between {
-                lo,
-                hi,
-                gap,
-                before,
-            } => Some((lo, hi, gap, before)),
-        };
+        let interval =
+            match self.first_overlap_sample(a, b, seg, (start, h), since, (r, end_overlaps)) {
+                Sampled::Slow if end_overlaps => Some((start, h, None, None)),
+                Sampled::Slow | Sampled::Apart => None,
+                Sampled::Between {
+                    lo,
+                    hi,
+                    gap,
+                    before,
+                } => Some((lo, hi, gap, before)),
+            };
         interval.map(|(lo, hi, gap, before)| self.bisect(a, b, seg, lo, hi, since, (gap, before)))
     }
 
@@ -190,10 +191,9 @@ impl Region<'_> {
         a: usize,
         b: usize,
         seg: &[Segment],
-        start: f64,
-        h: f64,
+        (start, h): (f64, f64),
         since: Option<Since>,
-        end_overlaps: bool,
+        (end, end_overlaps): (&PairResult, bool),
     ) -> Sampled {
         // Each body at both ends of the interval: its travel, its swing and
         // the approach-speed bound all come from these four states.
@@ -242,12 +242,48 @@ impl Region<'_> {
             let along = self.closing_time((a, sa), (b, sb), centres, accel, (swing, turn));
             along.max(gap.max(0.0) / speed)
         };
+        // The last stretch, read backwards: a pair apart at the step's end
+        // has been apart since as long before it as the same two bounds
+        // give on the motion run backwards (velocities reversed; the
+        // acceleration and the bounds on spin stay), so it needs no sample
+        // there: each would find it apart, and the answer is the same. The
+        // gap: the end-of-step result's V-Clip distance and the part spheres
+        // it did not test, or where the separating-pair skip left no
+        // result, every part sphere's gap.
+        let apart_from = if end_overlaps {
+            h
+        } else {
+            let (ea, eb) = (&ends_a[1], &ends_b[1]);
+            let task = self.pair_task(a as u32, b as u32, ea, eb);
+            let tested = end.part_pairs_tested > 0;
+            let gap = if tested {
+                end.distance
+                    .min(narrowphase::far_part_gap(self.st.objects, &task))
+            } else {
+                narrowphase::part_sphere_gap(self.st.objects, &task, f64::NEG_INFINITY)
+            };
+            let back = |s: &BodyState| BodyState {
+                velocity: -s.velocity,
+                ..*s
+            };
+            let (ra, rb) = (back(ea), back(eb));
+            let axes = [
+                (tested && !end.penetrating).then_some(end.closest_axis),
+                Some(ea.position - eb.position),
+            ];
+            let along = axes
+                .into_iter()
+                .flatten()
+                .map(|n| self.closing_time((a, &ra), (b, &rb), n, accel, (swing, turn)))
+                .fold(0.0, f64::max);
+            h - (gap.max(0.0) / speed).max(along)
+        };
         let (mut prev, mut prev_gap) = (start, None);
         // The apart sample before `prev`, and its V-Clip distance.
         let mut before: Option<(f64, f64)> = None;
         let mut t = (start + spacing.max(first)).min(h);
         loop {
-            if t >= h {
+            if t >= apart_from {
                 // The end-of-step result stands for a sample at h.
                 return if end_overlaps {
                     Sampled::Between {
