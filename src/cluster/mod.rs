@@ -196,6 +196,51 @@ const CHUNKS_IN_FLIGHT: usize = 1;
 /// others, and the stage waited for it.
 const CHUNK_SHARE: f64 = 0.5;
 
+/// How often rank 0 looks for answers while it steps a group of its own
+/// (`Polled`): a probe per worker costs about a microsecond, and an event
+/// calls the executor a few times.
+const POLL_EVERY: Duration = Duration::from_micros(20);
+
+/// Rank 0's executor for a group step of its own within a self-scheduled
+/// stage: every stage the group calls runs inline, after serving the
+/// workers (`poll`).
+struct Polled<'p> {
+    inline: Inline,
+    poll: &'p mut dyn FnMut(),
+}
+
+impl<'p> Polled<'p> {
+    fn new(poll: &'p mut dyn FnMut()) -> Self {
+        Polled {
+            inline: Inline::default(),
+            poll,
+        }
+    }
+}
+
+impl Executor for Polled<'_> {
+    fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
+        (self.poll)();
+        self.inline.narrowphase(objects, tasks)
+    }
+    fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
+        (self.poll)();
+        self.inline.solve_islands(tasks)
+    }
+    fn step_groups(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<GroupReply> {
+        (self.poll)();
+        self.inline.step_groups(st, params, inputs)
+    }
+    fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
+        self.inline.finish()
+    }
+}
+
 /// A request on its way to a worker, sent without blocking: MPI reads the
 /// buffer until the send completes, so it is freed only then (`reap_posts`).
 struct Posted {
@@ -556,7 +601,7 @@ impl<'w> MpiExecutor<'w> {
         tasks: Vec<T>,
         costs: &[f64],
         make: impl Fn(Vec<T>) -> Req,
-        local: impl Fn(T) -> R,
+        local: impl Fn(T, &mut dyn FnMut()) -> R,
         unpack: impl Fn(Reply) -> Option<(Vec<R>, f64)>,
     ) -> (Vec<R>, f64, Vec<usize>) {
         let used = schedule::fastest_slots(&self.speeds, workers);
@@ -605,27 +650,47 @@ impl<'w> MpiExecutor<'w> {
                 }
             }};
         }
+        // Takes every answer that has arrived and hands its worker the next
+        // chunk.
+        macro_rules! serve {
+            () => {
+                for k in 0..slots.len() {
+                    let rank = self.roles.workers[slots[k] - 1];
+                    while !held[k].is_empty()
+                        && self
+                            .world
+                            .process_at_rank(rank)
+                            .immediate_probe_with_tag(protocol::TAG_REPLY)
+                            .is_some()
+                    {
+                        take_reply!(k);
+                        refill!(k);
+                    }
+                }
+            };
+        }
         for k in 0..slots.len() {
             refill!(k);
         }
         loop {
-            for k in 0..slots.len() {
-                let rank = self.roles.workers[slots[k] - 1];
-                while !held[k].is_empty()
-                    && self
-                        .world
-                        .process_at_rank(rank)
-                        .immediate_probe_with_tag(protocol::TAG_REPLY)
-                        .is_some()
-                {
-                    take_reply!(k);
-                    refill!(k);
-                }
-            }
+            serve!();
             self.reap_posts(&mut posted, false);
             let Some(i) = feed.own(costs) else { break };
+            let task = tasks[i].take().expect("handed out once");
             let clock = Instant::now();
-            results[i] = Some(local(tasks[i].take().expect("handed out once")));
+            // Rank 0's own task serves the workers as it goes (`POLL_EVERY`):
+            // a worker done with its chunk gets the next one then, not only
+            // once this task ends (a group step takes up to milliseconds,
+            // and with many workers each would wait for it).
+            let mut polled = clock;
+            let mut poll = || {
+                if polled.elapsed() >= POLL_EVERY {
+                    serve!();
+                    polled = Instant::now();
+                }
+            };
+            let r = local(task, &mut poll);
+            results[i] = Some(r);
             own_s += clock.elapsed().as_secs_f64();
             own_cost += costs[i];
             own.push(i);
@@ -883,7 +948,7 @@ impl MpiExecutor<'_> {
             tasks,
             &costs,
             |share| Req::SolveIslands { tasks: share },
-            |own| solver::solve_island(&own),
+            |own, _| solver::solve_island(&own),
             |reply| match reply {
                 Reply::SolveIslands { results, busy_s } => Some((results, busy_s)),
                 _ => None,
@@ -969,7 +1034,7 @@ impl MpiExecutor<'_> {
                 params: params.clone(),
                 inputs: share,
             },
-            |input| run_group(st, input, &mut Inline::default()),
+            |input, poll| run_group(st, input, &mut Polled::new(poll)),
             |reply| match reply {
                 Reply::StepGroups { replies, busy_s } => Some((replies, busy_s)),
                 _ => None,
@@ -1038,7 +1103,7 @@ impl MpiExecutor<'_> {
                     .map(|(g, range)| (inputs[g].clone(), range))
                     .collect(),
             },
-            |(g, range)| prepare_pairs(st, &inputs[g], range),
+            |(g, range), _| prepare_pairs(st, &inputs[g], range),
             |reply| match reply {
                 Reply::PreparePairs { prepared, busy_s } => Some((prepared, busy_s)),
                 _ => None,
