@@ -360,6 +360,7 @@ pub fn prepare_pairs(
         stage: StageSeconds::default(),
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
+        integrated: Default::default(),
     };
     let separating: HashMap<PairKey, Vector3<f64>> = input.separating.iter().cloned().collect();
     let since: SolvedSince = input.since.iter().cloned().collect();
@@ -610,6 +611,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         stage: StageSeconds::default(),
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
+        integrated: Default::default(),
     };
     let state = GroupState {
         seg,

@@ -292,6 +292,7 @@ impl World {
             stage: take(&mut self.stage),
             impacts: take(&mut self.impacts),
             pair_forces: BTreeMap::new(),
+            integrated: Default::default(),
         };
         let first = self.steps == 0;
         let fallen_before = world.counters.bodies_fallen;

@@ -18,6 +18,8 @@ use crate::collision::narrowphase::{
 use crate::dynamics::integrate::integrate;
 use crate::scene::{ForceWindow, Settings};
 use nalgebra::{Isometry3, Vector3};
+use rustc_hash::FxBuildHasher;
+use std::cell::RefCell;
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
@@ -62,7 +64,26 @@ pub(crate) struct Region<'s> {
     pub impacts: Vec<Touching>,
     /// Total resting normal force on each pair in its latest solve.
     pub pair_forces: BTreeMap<(BodyId, BodyId), f64>,
+    /// Integrations along segments already done (`integrate_segment`).
+    pub integrated: Integrated,
 }
+
+/// A pile's group step asks for hundreds of thousands of integrations,
+/// many of them once (each bisection query's instant): the memo starts
+/// again past this many entries (about 2 MB), which changes no answer. The
+/// repeats come close together: 4096 kept 93 % of the hits of an unbounded
+/// memo in the 1000-body pile (58 % of its integrations were repeats, 41 %
+/// in the 200-body pour), which grew the process by 45 MB at 32 768.
+const INTEGRATED_KEPT: usize = 1 << 12;
+
+/// The integrations a region has done, by body, segment and interval: the
+/// same instant of the same segment is asked for by every pair of its body
+/// (each time of impact integrates both bodies at both ends of its
+/// interval, and the step's end is each body's end state), and a step
+/// along a segment is a pure function of these, so a repeat is answered
+/// with the same bits.
+#[derive(Default)]
+pub(crate) struct Integrated(RefCell<HashMap<[u64; 21], BodyState, FxBuildHasher>>);
 
 /// A body's motion over the current step: start state at `time` (seconds into
 /// the step) with constant force and torque until the end of the step.
@@ -104,14 +125,49 @@ impl<'s> Region<'s> {
     }
 
     pub fn integrate_segment(&self, i: usize, s: &Segment, h: f64) -> BodyState {
-        integrate(
+        let st = &s.state;
+        let q = st.orientation.coords;
+        let key = [
+            i as f64,
+            h,
+            st.position.x,
+            st.position.y,
+            st.position.z,
+            q.x,
+            q.y,
+            q.z,
+            q.w,
+            st.velocity.x,
+            st.velocity.y,
+            st.velocity.z,
+            st.angular_momentum.x,
+            st.angular_momentum.y,
+            st.angular_momentum.z,
+            s.force.x,
+            s.force.y,
+            s.force.z,
+            s.torque.x,
+            s.torque.y,
+            s.torque.z,
+        ]
+        .map(f64::to_bits);
+        if let Some(done) = self.integrated.0.borrow().get(&key) {
+            return *done;
+        }
+        let done = integrate(
             &s.state,
             self.object(i),
             self.bodies[i].kind,
             &s.force,
             &s.torque,
             h,
-        )
+        );
+        let mut memo = self.integrated.0.borrow_mut();
+        if memo.len() >= INTEGRATED_KEPT {
+            memo.clear();
+        }
+        memo.insert(key, done);
+        done
     }
 
     /// Body `i` as it is in `state` (a segment's, or one integrated along it).
