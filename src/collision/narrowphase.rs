@@ -172,19 +172,27 @@ pub fn separation_along(
     n: &Vector3<f64>,
 ) -> f64 {
     let (na, nb) = (pose_a.rotation.inverse() * n, pose_b.rotation.inverse() * n);
-    let low_a = oa
-        .parts
-        .iter()
-        .map(|p| p.hull.support(&-na).dot(&na))
-        .fold(f64::INFINITY, f64::min)
-        + n.dot(&pose_a.translation.vector);
-    let high_b = ob
-        .parts
-        .iter()
-        .map(|p| p.hull.support(&nb).dot(&nb))
-        .fold(f64::NEG_INFINITY, f64::max)
-        + n.dot(&pose_b.translation.vector);
+    let low_a = -highest_along(oa, &-na) + n.dot(&pose_a.translation.vector);
+    let high_b = highest_along(ob, &nb) + n.dot(&pose_b.translation.vector);
     low_a - high_b
+}
+
+/// max over the object's parts of (support along `d`)·`d`, local frame. A
+/// part whose bounding sphere lies wholly below the highest found so far
+/// (by more than rounding) cannot raise it and is passed over; the maximum
+/// is exact in any order, so the answer is a full scan's to the bit.
+fn highest_along(object: &ObjectDef, d: &Vector3<f64>) -> f64 {
+    let length = d.norm();
+    let mut high = f64::NEG_INFINITY;
+    for p in &object.parts {
+        let reach = p.sphere.radius * length;
+        let top = p.sphere.center.dot(d) + reach;
+        if top < high - 1e-9 * (reach + p.sphere.center.norm() * length) {
+            continue;
+        }
+        high = high.max(p.hull.support(d).dot(d));
+    }
+    high
 }
 
 /// V-Clip alone: `None` when a part pair overlaps, else the smallest gap
