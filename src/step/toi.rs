@@ -7,7 +7,7 @@
 use super::Executor;
 use super::contact::SolvedTogether;
 use super::region::{PairKey, Region, Segment, pose};
-use crate::body::{BodyKind, BodyState};
+use crate::body::{BodyKind, BodyState, ObjectDef};
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::{self, CONTACT_TOLERANCE, PairResult, PairTask};
 use nalgebra::Vector3;
@@ -257,26 +257,26 @@ impl Region<'_> {
             let task = self.pair_task(a as u32, b as u32, ea, eb);
             let tested = end.part_pairs_tested > 0;
             let gap = if tested {
-                end.distance
-                    .min(narrowphase::far_part_gap(self.st.objects, &task))
+                gap_bound(self.st.objects, end, &task)
             } else {
-                narrowphase::part_sphere_gap(self.st.objects, &task, f64::NEG_INFINITY)
+                narrowphase::part_sphere_gap(self.st.objects, &task, f64::NEG_INFINITY).max(0.0)
             };
             let back = |s: &BodyState| BodyState {
                 velocity: -s.velocity,
                 ..*s
             };
-            let (ra, rb) = (back(ea), back(eb));
             let axes = [
                 (tested && !end.penetrating).then_some(end.closest_axis),
                 Some(ea.position - eb.position),
             ];
-            let along = axes
-                .into_iter()
-                .flatten()
-                .map(|n| self.closing_time((a, &ra), (b, &rb), n, accel, (swing, turn)))
-                .fold(0.0, f64::max);
-            h - (gap.max(0.0) / speed).max(along)
+            let along = self.longest_closing_time(
+                (a, &back(ea)),
+                (b, &back(eb)),
+                axes,
+                accel,
+                (swing, turn),
+            );
+            h - (gap / speed).max(along)
         };
         let (mut prev, mut prev_gap) = (start, None);
         // The apart sample before `prev`, and its V-Clip distance.
@@ -309,13 +309,7 @@ impl Region<'_> {
             // A lower bound on the gap: V-Clip's distance over the part pairs
             // it tested, and for the others the gap between their part
             // spheres.
-            let gap = if r.penetrating {
-                0.0
-            } else {
-                r.distance
-                    .min(narrowphase::far_part_gap(self.st.objects, &task))
-                    .max(0.0)
-            };
+            let gap = gap_bound(self.st.objects, &r, &task);
             // Axes to try: the closest points' line, the contact normal where
             // they touch, and the centres' line.
             let axes = [
@@ -323,16 +317,27 @@ impl Region<'_> {
                 r.contacts.first().map(|c| c.normal),
                 Some(sa.position - sb.position),
             ];
-            let along = axes
-                .into_iter()
-                .flatten()
-                .map(|n| self.closing_time((a, &sa), (b, &sb), n, accel, (swing, turn)))
-                .fold(0.0, f64::max);
+            let along = self.longest_closing_time((a, &sa), (b, &sb), axes, accel, (swing, turn));
             before = prev_gap.map(|(distance, _)| (prev, distance));
             prev = t;
             prev_gap = (!r.penetrating).then_some((r.distance, gap));
             t = (t + spacing.max(gap / speed).max(along)).min(h);
         }
+    }
+
+    /// The longest `closing_time` over the axes given (0 with none).
+    fn longest_closing_time<const N: usize>(
+        &self,
+        (a, sa): (usize, &BodyState),
+        (b, sb): (usize, &BodyState),
+        axes: [Option<Vector3<f64>>; N],
+        accel: Vector3<f64>,
+        bounds: (f64, [(f64, f64); 2]),
+    ) -> f64 {
+        axes.into_iter()
+            .flatten()
+            .map(|n| self.closing_time((a, sa), (b, sb), n, accel, bounds))
+            .fold(0.0, f64::max)
     }
 
     /// How long two bodies in states `sa`, `sb` stay apart at least, by the
@@ -891,5 +896,18 @@ impl Region<'_> {
         group.sort_unstable();
         let states = group.into_iter().map(|i| (i, state(self, i))).collect();
         (states, group_pairs, results)
+    }
+}
+
+/// A lower bound on the distance of a pair at the instant of its result
+/// `r` (query `task`): V-Clip's distance over the part pairs it tested and
+/// the part spheres' gap for the others; 0 where it overlaps.
+fn gap_bound(objects: &[ObjectDef], r: &PairResult, task: &PairTask) -> f64 {
+    if r.penetrating {
+        0.0
+    } else {
+        r.distance
+            .min(narrowphase::far_part_gap(objects, task))
+            .max(0.0)
     }
 }
