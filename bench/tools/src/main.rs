@@ -8,7 +8,9 @@
 //! (variant `even` / `slow`, with or without `_force`), or `pour` (the
 //! nuts-and-bolts pours of `scripts/bench_pour.sh`, variant = the commit), or
 //! `network` (`scripts/bench_network.sh`: ranks = PCs of a lab, variant =
-//! the link, `1pc` for one rank without a lab).
+//! the link, `1pc` for one rank without a lab), or `many_ranks`
+//! (`scripts/bench_many_ranks.sh`: the pours on 1 … 16 ranks, variant = the
+//! scene's name).
 //!
 //! Summaries that are missing (a run that failed or was cut off by the
 //! script's time limit) are listed and left out.
@@ -91,6 +93,14 @@ fn main() {
     }
     for m in &missing {
         eprintln!("report: no summary for {m} (failed or cut off)");
+    }
+    if !runs.is_empty() && runs.iter().all(|r| r.series == "many_ranks") {
+        // scripts/bench_many_ranks.sh: many_ranks.{csv,md,png} only.
+        many_ranks(&runs, &out);
+        for m in &missing {
+            eprintln!("report: left out of many_ranks.md: {m}");
+        }
+        return;
     }
     if !runs.is_empty() && runs.iter().all(|r| r.series == "network") {
         // scripts/bench_network.sh: network.{csv,md,png} only; the other
@@ -1164,6 +1174,164 @@ fn network(runs: &[Run], out: &Path) {
         "The network experiment: a lab in a box at 100 and 10 Mbit/s",
         &panels,
         3,
+    ) {
+        eprintln!("report: {e}");
+    }
+}
+
+/// The pours on many ranks (`scripts/bench_many_ranks.sh`): per scene and
+/// rank count, medians over the reps of the wall time, the speed-up over one
+/// rank beside Amdahl's bound 1 / ((1 − p) + p / R) with p the one-rank
+/// runs' parallel fraction (`distributed.parallel_fraction`: the share of
+/// the wall time inside work that goes to other ranks when there are
+/// some), the efficiency, how often the group steps went out, and rank 0's
+/// waiting; every run of a scene must end on one state hash.
+/// `many_ranks.csv`, `many_ranks.md`, `many_ranks.png`.
+fn many_ranks(runs: &[Run], out: &Path) {
+    let mut scenes: BTreeMap<(u64, String), BTreeMap<u32, Vec<&Run>>> = BTreeMap::new();
+    for r in runs.iter().filter(|r| r.series == "many_ranks") {
+        scenes
+            .entry((r.bodies, r.variant.clone()))
+            .or_default()
+            .entry(r.ranks)
+            .or_default()
+            .push(r);
+    }
+    let mut csv = String::from(
+        "scene,bodies,ranks,runs,sim_s,wall_median_s,speedup,amdahl_bound,efficiency,\
+         groups_distributed_share,rank0_waiting_share,largest_group_share,hashes\n",
+    );
+    let mut md = String::new();
+    let (mut measured, mut bound_lines, mut per_sim) = (Vec::new(), Vec::new(), Vec::new());
+    let mut most_ranks = 1u32;
+    for ((bodies, scene), by) in &scenes {
+        let med = |rs: &[&Run], g: &dyn Fn(&Value) -> f64| {
+            median(&rs.iter().map(|r| g(&r.s)).collect::<Vec<_>>())
+        };
+        let one = by.get(&1);
+        let one_wall = one.map_or(f64::NAN, |rs| med(rs, &|s| f(s, &["wall_time_s"])));
+        let p = one.map_or(f64::NAN, |rs| {
+            med(rs, &|s| f(s, &["distributed", "parallel_fraction"]))
+        });
+        let mut hashes: Vec<&str> = by
+            .values()
+            .flatten()
+            .filter_map(|r| r.s["state_hash"].as_str())
+            .collect();
+        hashes.sort_unstable();
+        hashes.dedup();
+        let _ = writeln!(
+            md,
+            "## {scene} ({bodies} bodies), {} s simulated\n\n\
+             Parallel fraction on one rank p = {p:.3} (Amdahl's bound at R ranks: \
+             1 / ((1 − p) + p / R)). State hashes: {} ({}).\n\n\
+             | ranks | runs | wall [s] | speed-up | Amdahl's bound | efficiency | \
+             steps with group steps sent out | rank 0 waiting | largest group's share |\n\
+             |---|---|---|---|---|---|---|---|---|",
+            med(by.values().next().map_or(&[][..], |v| &v[..]), &|s| f(
+                s,
+                &["sim_time_s"]
+            )),
+            hashes.join(", "),
+            if hashes.len() == 1 {
+                "one, as it must be"
+            } else {
+                "DIFFER"
+            }
+        );
+        let (mut line, mut bound) = (Vec::new(), Vec::new());
+        for (&ranks, rs) in by {
+            most_ranks = most_ranks.max(ranks);
+            let wall = med(rs, &|s| f(s, &["wall_time_s"]));
+            let sim = med(rs, &|s| f(s, &["sim_time_s"]));
+            let speedup = one_wall / wall;
+            let amdahl = 1.0 / ((1.0 - p) + p / ranks as f64);
+            let sent = med(rs, &|s| {
+                let d = f(s, &["distributed", "groups_distributed"]);
+                d / (d + f(s, &["distributed", "groups_local"])).max(1.0)
+            });
+            let waiting = med(rs, &|s| {
+                f(&s["per_rank"][0], &["waiting_s"]) / f(s, &["wall_time_s"])
+            });
+            let largest = med(rs, &|s| f(s, &["distributed", "largest_group_share"]));
+            let run_hashes: Vec<&str> = rs
+                .iter()
+                .filter_map(|r| r.s["state_hash"].as_str())
+                .collect();
+            let _ = writeln!(
+                csv,
+                "{scene},{bodies},{ranks},{},{sim},{wall:e},{speedup:.4},{amdahl:.4},{:.4},{sent:.4},{waiting:.4},{largest:.4},{}",
+                rs.len(),
+                speedup / ranks as f64,
+                run_hashes.join(" ")
+            );
+            let _ = writeln!(
+                md,
+                "| {ranks} | {} | {wall:.3} | {speedup:.2} | {amdahl:.2} | {:.0} % | {:.0} % | {:.0} % | {:.0} % |",
+                rs.len(),
+                100.0 * speedup / ranks as f64,
+                100.0 * sent,
+                100.0 * waiting,
+                100.0 * largest
+            );
+            line.push((ranks as f64, speedup));
+            bound.push((ranks as f64, amdahl));
+            per_sim.push((scene.clone(), (ranks as f64, wall / sim)));
+        }
+        md.push('\n');
+        measured.push(plot::Series {
+            label: format!("{scene}: measured"),
+            points: line,
+            thin: false,
+        });
+        bound_lines.push(plot::Series {
+            label: format!("{scene}: Amdahl's bound (p = {p:.2})"),
+            points: bound,
+            thin: true,
+        });
+    }
+    std::fs::write(out.join("many_ranks.csv"), csv).expect("write many_ranks.csv");
+    std::fs::write(out.join("many_ranks.md"), md).expect("write many_ranks.md");
+    let mut speedup_series = measured;
+    speedup_series.extend(bound_lines);
+    speedup_series.push(plot::Series {
+        label: "ideal (R)".into(),
+        points: vec![(1.0, 1.0), (most_ranks as f64, most_ranks as f64)],
+        thin: true,
+    });
+    let mut wall_series: Vec<plot::Series> = Vec::new();
+    for (label, point) in per_sim {
+        match wall_series.iter_mut().find(|s| s.label == label) {
+            Some(s) => s.points.push(point),
+            None => wall_series.push(plot::Series {
+                label,
+                points: vec![point],
+                thin: false,
+            }),
+        }
+    }
+    let panels = [
+        plot::Panel {
+            title: "speed-up over one rank".into(),
+            x_label: "ranks (one per core)".into(),
+            y_label: "speed-up".into(),
+            series: speedup_series,
+            ..Default::default()
+        },
+        plot::Panel {
+            title: "wall time per simulated second".into(),
+            x_label: "ranks (one per core)".into(),
+            y_label: "wall / simulated".into(),
+            y_log: true,
+            series: wall_series,
+            ..Default::default()
+        },
+    ];
+    if let Err(e) = plot::draw(
+        &out.join("many_ranks.png"),
+        "The pours on many ranks against Amdahl's bound",
+        &panels,
+        2,
     ) {
         eprintln!("report: {e}");
     }

@@ -1,0 +1,99 @@
+#!/usr/bin/env bash
+# The pours on many ranks: `crowd200` for 2 s and `crowd1000` for its first
+# second (scripts/crowd.sh's scenes), --no-render, under `mpirun -np R` for
+# each R in RANKS, REPS runs each (REPS1000 for the 1000-body pour), all
+# interleaved. Rank counts above the machine's cores are left out (never
+# oversubscribed: this measures what cores give). Writes
+# OUT/runs/<scene>-<R>-<rep>/summary.json and OUT/manifest.csv, then with the
+# report tool (bench/tools) OUT/many_ranks.{md,csv,png}: per scene the speed-up
+# over one rank beside Amdahl's bound from the one-rank runs' parallel
+# fraction, the efficiency, rank 0's waiting, and a check that every run of a
+# scene ends on one state hash.
+#
+# Usage: scripts/bench_many_ranks.sh                  build, run, report
+#        BIN=path/to/rigidsim REPORT=0 OUT=dir scripts/bench_many_ranks.sh
+#                                  runs only (a machine without the toolchain)
+#        scripts/bench_many_ranks.sh --report DIR     the report of DIR's runs
+#        scripts/bench_many_ranks.sh --tiny           1 and 2 ranks, a few steps,
+#                                  into target/bench-tiny/ (CI: it cannot rot)
+# Knobs: RANKS="1 2 4 8 16" SCENES="200 1000" REPS=3 REPS1000=1
+#        DURATION200=2 DURATION1000=1 RUN_LIMIT=600 (seconds a run may take)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+repo=$(pwd)
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+
+report() {
+  local dir=$1
+  cargo build --release --quiet --manifest-path bench/tools/Cargo.toml \
+    --target-dir "${CARGO_TARGET_DIR:-target}"
+  local tool
+  tool=$(cd "${CARGO_TARGET_DIR:-target}" && pwd)/release/rigidsim-bench-report
+  # The manifest's run folders are relative to DIR.
+  (cd "$dir" && "$tool" manifest.csv .)
+  cat "$dir/many_ranks.md"
+}
+
+if [ "${1:-}" = "--report" ]; then
+  report "${2:?usage: scripts/bench_many_ranks.sh --report DIR}"
+  exit 0
+fi
+
+machine=${BENCH_MACHINE:-$(hostname)-$(nproc)cpu}
+out=${OUT:-bench/results/$machine/many_ranks}
+if [ "${1:-}" = "--tiny" ] || [ "${TINY:-0}" = 1 ]; then
+  out=${OUT:-target/bench-tiny/$machine/many_ranks}
+  RANKS="1 2"; REPS=1; REPS1000=1; DURATION200=0.05; DURATION1000=0.02
+fi
+RANKS=${RANKS:-"1 2 4 8 16"}; SCENES=${SCENES:-"200 1000"}
+REPS=${REPS:-3}; REPS1000=${REPS1000:-1}
+DURATION200=${DURATION200:-2}; DURATION1000=${DURATION1000:-1}
+RUN_LIMIT=${RUN_LIMIT:-600}
+
+if [ -z "${BIN:-}" ]; then
+  source scripts/setup.sh
+  cargo build --release --quiet
+  BIN=${CARGO_TARGET_DIR:-target}/release/rigidsim
+fi
+mkdir -p "$out/runs"
+out=$(cd "$out" && pwd)
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+# A private copy: a rebuild during the runs must not mix versions.
+cp "$BIN" "$tmp/rigidsim"
+
+cores=$(nproc)
+ranks=()
+for r in $RANKS; do
+  if [ "$r" -le "$cores" ]; then ranks+=("$r"); else
+    echo "bench_many_ranks: $r ranks left out ($cores cores here)"; fi
+done
+
+source scripts/crowd.sh
+manifest=$out/manifest.csv
+echo "series,bodies,ranks,variant,rep,dir" >"$manifest"
+max_reps=$REPS
+[ "$REPS1000" -gt "$max_reps" ] && max_reps=$REPS1000
+for n in $SCENES; do crowd_of "$n" >"$tmp/crowd$n.toml"; done
+started=$(date +%s)
+for rep in $(seq 1 "$max_reps"); do
+  for n in $SCENES; do
+    reps=$REPS; duration=$DURATION200
+    if [ "$n" = 1000 ]; then reps=$REPS1000; duration=$DURATION1000; fi
+    [ "$rep" -le "$reps" ] || continue
+    for r in "${ranks[@]}"; do
+      name=crowd$n-$r-$rep
+      echo "bench_many_ranks: crowd$n, $r rank(s), rep $rep ($(( $(date +%s) - started )) s so far)"
+      rm -rf "${out:?}/runs/$name"
+      timeout "$RUN_LIMIT" mpirun -np "$r" "$tmp/rigidsim" "$tmp/crowd$n.toml" \
+        --duration "$duration" --no-render --no-progress --sample-every 0.5 \
+        --out "$out/runs/$name" >/dev/null 2>&1 ||
+        echo "bench_many_ranks: run failed or cut off (crowd$n, $r ranks)"
+      # Only the summary is kept (the trajectories are megabytes).
+      find "$out/runs/$name" -type f ! -name summary.json -delete 2>/dev/null || true
+      echo "many_ranks,$n,$r,crowd$n,$rep,runs/$name" >>"$manifest"
+    done
+  done
+done
+echo "bench_many_ranks: runs done in $(( $(date +%s) - started )) s; results in $out"
+if [ "${REPORT:-1}" = 1 ]; then report "$out"; fi
