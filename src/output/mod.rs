@@ -5,6 +5,7 @@
 
 pub mod capture;
 pub mod checkpoint;
+pub mod decimal;
 pub mod progress;
 pub mod summary;
 pub mod trajectory;

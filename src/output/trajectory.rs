@@ -3,7 +3,7 @@
 //! centre of mass. Numbers are written in Rust's shortest round-trip form, so
 //! reading them back gives the exact simulated bits.
 
-use super::{FNV_OFFSET, fnv1a};
+use super::{FNV_OFFSET, decimal, fnv1a};
 use crate::body::{Body, ObjectDef};
 use serde::{Deserialize, Serialize};
 use std::io::{BufWriter, Read, Write};
@@ -59,19 +59,25 @@ impl RowWriter {
     }
 
     fn rows(&mut self, time: f64, rows: &[[f64; 13]]) -> std::io::Result<()> {
-        let mut line = String::with_capacity(256);
+        let mut line: Vec<u8> = Vec::with_capacity(320);
+        let mut digits = zmij::Buffer::new();
+        let mut index = itoa::Buffer::new();
+        let mut when = Vec::new();
+        decimal::push_f64(&mut when, &mut digits, time);
         for (i, r) in rows.iter().enumerate() {
+            // `{time},{i},{x},…` with std's `Display` bytes.
             line.clear();
-            use std::fmt::Write as _;
-            let _ = write!(
-                line,
-                "{time},{i},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-                r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11], r[12]
-            );
+            line.extend_from_slice(&when);
+            line.push(b',');
+            line.extend_from_slice(index.format(i).as_bytes());
+            for &v in r {
+                line.push(b',');
+                decimal::push_f64(&mut line, &mut digits, v);
+            }
             // Row and newline in one write: a run stopped mid-buffer never
             // leaves a row without its end of line.
-            line.push('\n');
-            self.write(line.as_bytes())?;
+            line.push(b'\n');
+            self.write(&line)?;
         }
         Ok(())
     }
