@@ -3,7 +3,7 @@
 
 use super::contact::{SpinResolves, Touching};
 use super::group::{self, GroupOutput, StepStart};
-use super::region::{PairKey, Region, Segment};
+use super::region::{PairKey, PairMap, Region, Segment};
 use super::stats::{GroupWork, NumericalFailure};
 use super::toi::{Since, SolvedSince};
 use super::{Executor, check_states};
@@ -11,7 +11,7 @@ use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
-use std::collections::{BTreeSet, HashMap};
+use std::collections::BTreeSet;
 use std::time::Instant;
 
 /// One step of the whole world (`World::step`).
@@ -116,7 +116,7 @@ fn segments(w: &Region) -> Vec<Segment> {
 struct SolvedStart {
     seg: Vec<Segment>,
     since: SolvedSince,
-    separating: HashMap<PairKey, Vector3<f64>>,
+    separating: PairMap<Vector3<f64>>,
     together: Vec<Vec<usize>>,
     spin_resolves: SpinResolves,
 }

@@ -26,7 +26,7 @@
 
 use super::contact::{SolvedTogether, SpinResolves, Touching, WarmContact};
 use super::impacts::step_group;
-use super::region::{PairKey, Region, Segment, StepStatic};
+use super::region::{PairKey, PairMap, Region, Segment, StepStatic};
 use super::stats::{Counters, NumericalFailure, StageSeconds};
 use super::toi::{Since, SolvedSince};
 use super::{Executor, Inline};
@@ -39,7 +39,7 @@ use crate::contact::island::DisjointSets;
 use crate::scene::Scene;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 
 /// Share of its radius by which each predicted swept sphere grows when the
 /// groups are formed (`plan_groups`; not for the pairs tested). Measured on
@@ -61,7 +61,7 @@ pub(crate) struct StepStart {
     /// `GROUP_MARGIN` (what the groups are formed by).
     pub grown: Vec<SphereProxy>,
     pub since: SolvedSince,
-    pub separating: HashMap<PairKey, Vector3<f64>>,
+    pub separating: PairMap<Vector3<f64>>,
     /// Bodies solved together at the step's start (islands of two or more).
     pub together: Vec<Vec<usize>>,
     pub spin_resolves: SpinResolves,
@@ -288,7 +288,7 @@ pub(crate) struct GroupState {
     /// group step's first stage).
     pub pairs: Vec<PairKey>,
     pub since: SolvedSince,
-    pub separating: HashMap<PairKey, Vector3<f64>>,
+    pub separating: PairMap<Vector3<f64>>,
     pub together: SolvedTogether,
     pub spin_resolves: SpinResolves,
     /// The first stage's answers, when computed beforehand in shares
@@ -362,7 +362,7 @@ pub fn prepare_pairs(
         pair_forces: BTreeMap::new(),
         integrated: Default::default(),
     };
-    let separating: HashMap<PairKey, Vector3<f64>> = input.separating.iter().cloned().collect();
+    let separating: PairMap<Vector3<f64>> = input.separating.iter().cloned().collect();
     let since: SolvedSince = input.since.iter().cloned().collect();
     let results =
         g.narrowphase_skipping_separating(&mut Inline::default(), pairs, &input.end, &separating);

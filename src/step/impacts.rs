@@ -4,7 +4,7 @@
 //! Reads only the group's own `Region` and `GroupState` (see `group`).
 
 use super::group::{GroupOutput, GroupState, PreparedPairs};
-use super::region::{PairKey, Region, Segment};
+use super::region::{PairKey, PairMap, Region, Segment};
 use super::stats::NumericalFailure;
 use super::toi::{Since, SolvedSince};
 use super::{EVENTS_PER_MOVING_BODY, Executor, MAX_EARLIER_IMPACTS, MIN_EVENTS_PER_STEP};
@@ -12,7 +12,7 @@ use crate::body::{Activity, BodyState};
 use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
 
 /// An impact time ordered for the queue (finite, so `total_cmp` is the
@@ -44,7 +44,7 @@ struct PairBook {
     /// Each body's candidate partners, ascending.
     partners: Vec<Vec<u32>>,
     /// Impact time of each pair whose time is known (`None`: no impact).
-    toi: HashMap<PairKey, Option<f64>>,
+    toi: PairMap<Option<f64>>,
     queue: BTreeSet<(ImpactTime, PairKey)>,
     /// Pairs whose time of impact is still to be found.
     dirty: BTreeSet<PairKey>,
@@ -64,7 +64,7 @@ impl PairBook {
         let mut book = PairBook {
             results: BTreeMap::new(),
             partners: vec![Vec::new(); n],
-            toi: HashMap::new(),
+            toi: PairMap::default(),
             queue: BTreeSet::new(),
             dirty: BTreeSet::new(),
             spheres: vec![None; n],

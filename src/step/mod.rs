@@ -52,7 +52,7 @@ use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
 use region::Region;
 use stats::{Distribution, GroupWork, RankSummary};
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
 
 /// Runs the distributable stages. One rank: `Inline`; several: `cluster`.
@@ -194,7 +194,7 @@ pub struct World {
     /// What the group steps cost (the schedule's prediction; never part of
     /// a result, not checkpointed).
     group_work: GroupWork,
-    pub(crate) features: HashMap<(u32, u32), Vec<CachedFeatures>>,
+    pub(crate) features: region::PairMap<Vec<CachedFeatures>>,
     pub(crate) sleep_timer: Vec<f64>,
     /// Resting system a sleeping body belongs to (its lowest body id).
     pub(crate) sleep_group: Vec<u32>,
@@ -227,7 +227,7 @@ impl World {
             touching: Vec::new(),
             impacts: Vec::new(),
             group_work: GroupWork::new(n),
-            features: HashMap::new(),
+            features: Default::default(),
             sleep_timer: vec![0.0; n],
             sleep_group: (0..n as u32).collect(),
             last_normal_force_sum: 0.0,

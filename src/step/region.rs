@@ -44,6 +44,12 @@ pub struct StepStatic<'s> {
 /// A body pair in local indices, `a < b`.
 pub(crate) type PairKey = (u32, u32);
 
+/// A map keyed by body pair. Fx, not std's SipHash: the step looks pairs up
+/// hundreds of thousands of times (feature caches, separating pairs, times
+/// of impact), its keys are not chosen by an adversary, and no result
+/// depends on a map's order.
+pub(crate) type PairMap<V> = HashMap<PairKey, V, FxBuildHasher>;
+
 /// The changing state of a set of bodies (see the module comment).
 pub(crate) struct Region<'s> {
     pub st: &'s StepStatic<'s>,
@@ -51,7 +57,7 @@ pub(crate) struct Region<'s> {
     pub ids: Vec<u32>,
     pub bodies: Vec<Body>,
     /// V-Clip's cached closest features per pair (warm starts of queries).
-    pub features: HashMap<PairKey, Vec<CachedFeatures>>,
+    pub features: PairMap<Vec<CachedFeatures>>,
     /// Resting forces of the last solve of each touching pair (warm start).
     pub warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
     pub sleep_timer: Vec<f64>,
@@ -259,9 +265,9 @@ impl<'s> Region<'s> {
         &self,
         touching: &[Touching],
         seg: &[Segment],
-    ) -> HashMap<PairKey, Vector3<f64>> {
+    ) -> PairMap<Vector3<f64>> {
         if !self.st.skip_separating {
-            return HashMap::new();
+            return PairMap::default();
         }
         let velocity_at = |i: usize, p: &Vector3<f64>| {
             self.body_at(i, seg[i].state)
@@ -294,7 +300,7 @@ impl<'s> Region<'s> {
         exec: &mut dyn Executor,
         pairs: &[PairKey],
         states: &[BodyState],
-        separating: &HashMap<PairKey, Vector3<f64>>,
+        separating: &PairMap<Vector3<f64>>,
     ) -> Vec<PairResult> {
         let clock = Instant::now();
         let skipped: Vec<bool> = pairs

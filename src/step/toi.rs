@@ -6,7 +6,7 @@
 
 use super::Executor;
 use super::contact::SolvedTogether;
-use super::region::{PairKey, Region, Segment, pose};
+use super::region::{PairKey, PairMap, Region, Segment, pose};
 use crate::body::{BodyKind, BodyState, ObjectDef};
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::{self, CONTACT_TOLERANCE, PairResult, PairTask};
@@ -38,7 +38,7 @@ pub(crate) fn allowed_depth(carried: f64) -> f64 {
 /// impact's τ, seconds into the step) and its deepest overlap then: an
 /// overlap its points already had then is carried, not new
 /// (`Region::sinking`). Pairs not listed carried none.
-pub(crate) type SolvedSince = HashMap<PairKey, Since>;
+pub(crate) type SolvedSince = PairMap<Since>;
 
 #[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub(crate) struct Since {
@@ -839,7 +839,8 @@ impl Region<'_> {
                 .entry(i)
                 .or_insert_with(|| world.integrate_segment(i, &seg[i], tau - seg[i].time))
         };
-        let mut queried: std::collections::HashSet<PairKey> = Default::default();
+        let mut queried: std::collections::HashSet<PairKey, rustc_hash::FxBuildHasher> =
+            Default::default();
         let (mut group_pairs, mut results) = (Vec::new(), Vec::new());
         while !frontier.is_empty() {
             // Bodies whose segment forces came from one contact solve hold
