@@ -4,7 +4,8 @@
 # video, fontconfig and a font for benchmark plots, for the browser test of
 # `rigidsim view`'s replay page: Chromium, Node.js and npm, then the viewer's
 # npm packages (viewer/node_modules, from viewer/package-lock.json), and
-# iproute2 and openssh-server for the lab in a box. Safe to run again:
+# iproute2 and openssh-server for the lab in a box, valgrind for the
+# instruction counts of scripts/bench_instructions.sh. Safe to run again:
 # installs only what is missing.
 set -euo pipefail
 
@@ -28,6 +29,8 @@ command -v ip >/dev/null 2>&1 && command -v tc >/dev/null 2>&1 || need+=(iproute
 command -v unshare >/dev/null 2>&1 || need+=(util-linux)
 [ -x /usr/sbin/sshd ] || need+=(openssh-server)
 command -v ssh >/dev/null 2>&1 || need+=(openssh-client)
+# Instruction counts for scripts/bench_instructions.sh.
+command -v valgrind >/dev/null 2>&1 || need+=(valgrind)
 
 if [ ${#need[@]} -gt 0 ]; then
   echo "setup: installing ${need[*]}" >&2
