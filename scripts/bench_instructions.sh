@@ -80,7 +80,7 @@ crowd_of 1000 >"$tmp/crowd1000.toml"
 # Instructions of one command (valgrind's "I refs").
 count() {
   valgrind --tool=cachegrind --cache-sim=no --cachegrind-out-file=/dev/null "$@" \
-    2>"$tmp/vg.txt" >"$tmp/stdout.txt" || { cat "$tmp/vg.txt" >&2; return 1; }
+    2>"$tmp/vg.txt" >/dev/null || { cat "$tmp/vg.txt" >&2; return 1; }
   grep -o 'I *refs: *[0-9,]*' "$tmp/vg.txt" | tr -dc '0-9'
 }
 hash_of() { grep -o '"state_hash": *"[0-9a-f]*"' "$1/summary.json" | grep -o '[0-9a-f]\{16\}'; }
