@@ -600,19 +600,23 @@ fn solve_phase(
     phase: Phase,
     stats: &mut SolveStats,
 ) -> (Vec<Row>, Vec<f64>, f64) {
-    let mut rows = Vec::new();
-    let mut rhs = Vec::new();
-    let mut lo = Vec::new();
-    let mut hi = Vec::new();
-    let mut findex = Vec::new();
+    // At most three rows a contact (its normal and two friction rows),
+    // reserved at once: grown a row at a time they were 2 % of the
+    // pyramid's instructions.
+    let most = 3 * task.contacts.len();
+    let mut rows = Vec::with_capacity(most);
+    let mut rhs = Vec::with_capacity(most);
+    let mut lo = Vec::with_capacity(most);
+    let mut hi = Vec::with_capacity(most);
+    let mut findex = Vec::with_capacity(most);
     // Warm start of the iterative solve: last solve's impulses over this
     // phase's interval (resting phase only; an impact has no history).
-    let mut warm = Vec::new();
+    let mut warm = Vec::with_capacity(most);
     // Each row's velocity-product term over the interval (`gap_curvature`):
     // the energy guard counts it as velocity the row already has.
-    let mut bias = Vec::new();
+    let mut bias = Vec::with_capacity(most);
     // Each row's coefficient of restitution where the impact applies one.
-    let mut restitution = Vec::new();
+    let mut restitution = Vec::with_capacity(most);
     let resting = matches!(phase, Phase::Resting { .. });
     for (ci, c) in task.contacts.iter().enumerate() {
         let (a, b) = (c.a as usize, c.b as usize);
