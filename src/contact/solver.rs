@@ -287,6 +287,27 @@ impl Row {
         (moves(&self.dva, &self.dwa), moves(&self.dvb, &self.dwb))
     }
 
+    /// This row's side on body `body` (A or B): J's linear and angular
+    /// parts there and the velocity change M⁻¹Jᵀ a unit impulse gives it,
+    /// the terms of `coupling` through that body.
+    pub(super) fn side(&self, body: usize) -> RowSide {
+        if body == self.a {
+            RowSide {
+                lin: self.lin,
+                ang: self.ang_a,
+                dv: self.dva,
+                dw: self.dwa,
+            }
+        } else {
+            RowSide {
+                lin: -self.lin,
+                ang: self.ang_b,
+                dv: self.dvb,
+                dw: self.dwb,
+            }
+        }
+    }
+
     /// J_self · (M⁻¹ J_other ᵀ).
     pub(super) fn coupling(&self, other: &Row) -> f64 {
         let mut s = 0.0;
@@ -302,6 +323,23 @@ impl Row {
             }
         }
         s
+    }
+}
+
+/// A row on one of its bodies (`Row::side`).
+#[derive(Clone, Copy)]
+pub(super) struct RowSide {
+    pub(super) lin: Vector3<f64>,
+    pub(super) ang: Vector3<f64>,
+    pub(super) dv: Vector3<f64>,
+    pub(super) dw: Vector3<f64>,
+}
+
+impl RowSide {
+    /// The coupling of this side's row with `other`'s row through the
+    /// body they share: `Row::coupling`'s term for that body, to the bit.
+    pub(super) fn coupling(&self, other: &RowSide) -> f64 {
+        self.lin.dot(&other.dv) + self.ang.dot(&other.dw)
     }
 }
 

@@ -81,9 +81,22 @@ pub(super) fn free_block_step(
             &[]
         }
     };
+    // Each body's free rows' sides on it, laid out as `free_of`.
+    let mut sides = Vec::with_capacity(free_of.len());
+    for (body, w) in start.windows(2).enumerate() {
+        sides.extend(
+            free_of[w[0]..w[1]]
+                .iter()
+                .map(|&k| rows[free[k]].side(body)),
+        );
+    }
     // Lower triangle, one entry per coupled pair (coupling sums over both
     // shared bodies, so a pair met through two bodies is entered once),
-    // gathered row by row (columns ascending).
+    // gathered row by row (columns ascending). An entry is summed body by
+    // body, row i's A side first, as `Row::coupling` sums it (a body that
+    // does not move adds nothing there): the same values to the bit, from
+    // each body's list of rows instead of a test of every pair's bodies.
+    let mut slot = vec![0usize; n];
     let mut row_ptr = Vec::with_capacity(n + 1);
     row_ptr.push(0usize);
     // Row k's entries are at most its bodies' free rows: reserved at once
@@ -106,14 +119,26 @@ pub(super) fn free_block_step(
             of(rows[i].b, moves_b),
             k,
         );
-        for &l in &neighbours {
-            let mut val = rows[i].coupling(&rows[free[l]]);
-            if l == k {
-                val += compliance * diag[i];
-            }
+        let base = cols.len();
+        for (e, &l) in neighbours.iter().enumerate() {
+            slot[l] = base + e;
             cols.push(l);
-            vals.push(val);
+            vals.push(0.0);
         }
+        for (body, moves) in [(rows[i].a, moves_a), (rows[i].b, moves_b)] {
+            if !moves {
+                continue;
+            }
+            let own = rows[i].side(body);
+            let list = start[body]..start[body + 1];
+            for (&l, other) in free_of[list.clone()].iter().zip(&sides[list]) {
+                if l > k {
+                    break;
+                }
+                vals[slot[l]] += own.coupling(other);
+            }
+        }
+        vals[slot[k]] += compliance * diag[i];
         row_ptr.push(cols.len());
     }
     // Row k's entries at and left of the diagonal are column k's at and
