@@ -11,7 +11,7 @@
 //! the whole load down to rounding. A is J M⁻¹ Jᵀ, so two rows couple only
 //! through a body that moves; a stack's block is banded, a pile's sparse.
 
-use super::solver::Row;
+use super::solver::{Row, RowSide};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
@@ -64,7 +64,7 @@ pub(super) fn free_block_step(
         position[i] = k;
     }
     let mut start = Vec::with_capacity(by_body.len() + 1);
-    let mut free_of = Vec::new();
+    let mut free_of = Vec::with_capacity(2 * n);
     start.push(0);
     for list in by_body {
         free_of.extend(
@@ -96,7 +96,6 @@ pub(super) fn free_block_step(
     // body, row i's A side first, as `Row::coupling` sums it (a body that
     // does not move adds nothing there): the same values to the bit, from
     // each body's list of rows instead of a test of every pair's bodies.
-    let mut slot = vec![0usize; n];
     let mut row_ptr = Vec::with_capacity(n + 1);
     row_ptr.push(0usize);
     // Row k's entries are at most its bodies' free rows: reserved at once
@@ -110,35 +109,44 @@ pub(super) fn free_block_step(
         })
         .sum();
     let (mut cols, mut vals) = (Vec::with_capacity(most), Vec::with_capacity(most));
-    let mut neighbours = Vec::new();
+    let sides_of = |body: usize, moves: bool| -> &[RowSide] {
+        if moves {
+            &sides[start[body]..start[body + 1]]
+        } else {
+            &[]
+        }
+    };
     for (k, &i) in free.iter().enumerate() {
-        let (moves_a, moves_b) = rows[i].moves();
-        merge_below(
-            &mut neighbours,
-            of(rows[i].a, moves_a),
-            of(rows[i].b, moves_b),
-            k,
-        );
-        let base = cols.len();
-        for (e, &l) in neighbours.iter().enumerate() {
-            slot[l] = base + e;
+        let row = &rows[i];
+        let (moves_a, moves_b) = row.moves();
+        let (rows_a, rows_b) = (of(row.a, moves_a), of(row.b, moves_b));
+        let (sides_a, sides_b) = (sides_of(row.a, moves_a), sides_of(row.b, moves_b));
+        let (own_a, own_b) = (row.side(row.a), row.side(row.b));
+        // The two bodies' rows up to k merged (each list ascending), each
+        // entry summed from the list or lists it is in.
+        let (mut x, mut y) = (0, 0);
+        loop {
+            let pa = rows_a.get(x).copied().unwrap_or(usize::MAX);
+            let pb = rows_b.get(y).copied().unwrap_or(usize::MAX);
+            let l = pa.min(pb);
+            if l > k {
+                break;
+            }
+            let mut val = 0.0;
+            if pa == l {
+                val += own_a.coupling(&sides_a[x]);
+                x += 1;
+            }
+            if pb == l {
+                val += own_b.coupling(&sides_b[y]);
+                y += 1;
+            }
+            if l == k {
+                val += compliance * diag[i];
+            }
             cols.push(l);
-            vals.push(0.0);
+            vals.push(val);
         }
-        for (body, moves) in [(rows[i].a, moves_a), (rows[i].b, moves_b)] {
-            if !moves {
-                continue;
-            }
-            let own = rows[i].side(body);
-            let list = start[body]..start[body + 1];
-            for (&l, other) in free_of[list.clone()].iter().zip(&sides[list]) {
-                if l > k {
-                    break;
-                }
-                vals[slot[l]] += own.coupling(other);
-            }
-        }
-        vals[slot[k]] += compliance * diag[i];
         row_ptr.push(cols.len());
     }
     // Row k's entries at and left of the diagonal are column k's at and
@@ -152,24 +160,6 @@ pub(super) fn free_block_step(
     let mut step: Vec<f64> = residual.iter().map(|r| -r).collect();
     block.solve_in_place(&mut step)?;
     step.iter().all(|x| x.is_finite()).then_some(step)
-}
-
-/// Into `out`: the block positions listed in `a` and `b` (each ascending)
-/// that are at most `k`, ascending, each once.
-fn merge_below(out: &mut Vec<usize>, a: &[usize], b: &[usize], k: usize) {
-    out.clear();
-    let (mut x, mut y) = (0, 0);
-    loop {
-        let pa = a.get(x).copied().unwrap_or(usize::MAX);
-        let pb = b.get(y).copied().unwrap_or(usize::MAX);
-        let least = pa.min(pb);
-        if least > k {
-            break;
-        }
-        out.push(least);
-        x += usize::from(pa == least);
-        y += usize::from(pb == least);
-    }
 }
 
 /// The free block's upper triangle in compressed columns (rows ascending
