@@ -308,7 +308,9 @@ impl Row {
         }
     }
 
-    /// J_self · (M⁻¹ J_other ᵀ).
+    /// J_self · (M⁻¹ J_other ᵀ). The terms are `RowSide::coupling`'s,
+    /// written out: built from `side` they cost the 1000-body pile 2.5 %
+    /// more instructions (its dense systems ask this for every pair).
     pub(super) fn coupling(&self, other: &Row) -> f64 {
         let mut s = 0.0;
         for (body, lin, ang) in [

@@ -74,13 +74,6 @@ pub(super) fn free_block_step(
         );
         start.push(free_of.len());
     }
-    let of = |body: usize, moves: bool| -> &[usize] {
-        if moves {
-            &free_of[start[body]..start[body + 1]]
-        } else {
-            &[]
-        }
-    };
     // Each body's free rows' sides on it, laid out as `free_of`.
     let mut sides = Vec::with_capacity(free_of.len());
     for (body, w) in start.windows(2).enumerate() {
@@ -98,29 +91,25 @@ pub(super) fn free_block_step(
     // each body's list of rows instead of a test of every pair's bodies.
     let mut row_ptr = Vec::with_capacity(n + 1);
     row_ptr.push(0usize);
-    // Row k's entries are at most its bodies' free rows: reserved at once
-    // (pushed one at a time, their growth was 5 % of the pyramid's
-    // instructions).
-    let most: usize = free
-        .iter()
-        .map(|&i| {
-            let (moves_a, moves_b) = rows[i].moves();
-            of(rows[i].a, moves_a).len() + of(rows[i].b, moves_b).len()
-        })
-        .sum();
+    // Row k's entries are at most its bodies' free rows, so all rows' at
+    // most the sum of each body's count squared: reserved at once (pushed
+    // one at a time, their growth was 5 % of the pyramid's instructions).
+    let most: usize = start.windows(2).map(|w| (w[1] - w[0]).pow(2)).sum();
     let (mut cols, mut vals) = (Vec::with_capacity(most), Vec::with_capacity(most));
-    let sides_of = |body: usize, moves: bool| -> &[RowSide] {
+    // A moving body's free rows and their sides on it; none for a body
+    // the row does not move.
+    let on = |body: usize, moves: bool| -> (&[usize], &[RowSide]) {
         if moves {
-            &sides[start[body]..start[body + 1]]
+            let list = start[body]..start[body + 1];
+            (&free_of[list.clone()], &sides[list])
         } else {
-            &[]
+            (&[], &[])
         }
     };
     for (k, &i) in free.iter().enumerate() {
         let row = &rows[i];
         let (moves_a, moves_b) = row.moves();
-        let (rows_a, rows_b) = (of(row.a, moves_a), of(row.b, moves_b));
-        let (sides_a, sides_b) = (sides_of(row.a, moves_a), sides_of(row.b, moves_b));
+        let ((rows_a, sides_a), (rows_b, sides_b)) = (on(row.a, moves_a), on(row.b, moves_b));
         let (own_a, own_b) = (row.side(row.a), row.side(row.b));
         // The two bodies' rows up to k merged (each list ascending), each
         // entry summed from the list or lists it is in.
@@ -370,7 +359,7 @@ impl UpperBlock {
         // (supernodal: zeroed first; simplicial: each row of L once), so
         // the buffer is only sized, never cleared.
         factor.resize(symbolic.len_val(), 0.0);
-        let factor = &mut factor[..symbolic.len_val()];
+        let factor = factor.as_mut_slice();
         let req = symbolic
             .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
             .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
