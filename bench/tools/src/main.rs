@@ -860,25 +860,35 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
     let window: Vec<&Run> = runs.iter().filter(|r| r.series == "pour_window").collect();
     if !window.is_empty() {
         let big = keys.iter().map(|k| k.0).max().unwrap_or(0);
-        md.push_str("Growth over the same simulated window (the largest pour against 200 bodies), wall seconds outside `solve_islands`:\n\n| commit | 200 bodies [s] | ");
-        let _ = write!(md, "{big} bodies [s] | ratio |\n|---|---|---|---|\n");
+        md.push_str("Growth over the same simulated window (the largest pour against 200 bodies), wall seconds outside `solve_islands`, and how much more of each kind of work the larger pour does (ratios of the counters; per pair test: the time outside `solve_islands` over `counters.pair_tests`, in µs, 200 bodies → the larger pour):\n\n| commit | 200 bodies [s] | ");
+        let _ = write!(
+            md,
+            "{big} bodies [s] | ratio | impact events | queries | pair tests | contacts solved | outside per pair test [µs] |\n|---|---|---|---|---|---|---|---|---|\n"
+        );
         for v in &variants {
-            let outside = |rs: Vec<&Run>| {
-                med(&rs, &|r| {
-                    f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"])
-                })
-            };
-            let small = outside(window.iter().copied().filter(|r| &r.variant == v).collect());
-            let large = outside(
-                pour.iter()
-                    .copied()
-                    .filter(|r| &r.variant == v && r.bodies == big)
-                    .collect(),
-            );
+            let small: Vec<&Run> = window.iter().copied().filter(|r| &r.variant == v).collect();
+            let large: Vec<&Run> = pour
+                .iter()
+                .copied()
+                .filter(|r| &r.variant == v && r.bodies == big)
+                .collect();
+            let outside =
+                |r: &Run| f(&r.s, &["wall_time_s"]) - f(&r.s, &["stage_seconds", "solve_islands"]);
+            let counter = |rs: &[&Run], k: &str| med(rs, &|r| f(&r.s, &["counters", k]));
+            let ratio = |k: &str| counter(&large, k) / counter(&small, k);
+            let per_test =
+                |rs: &[&Run]| 1e6 * med(rs, &|r| outside(r) / f(&r.s, &["counters", "pair_tests"]));
+            let (a, b) = (med(&small, &outside), med(&large, &outside));
             let _ = writeln!(
                 md,
-                "| {v} | {small:.2} | {large:.2} | {:.1} |",
-                large / small
+                "| {v} | {a:.2} | {b:.2} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} → {:.1} |",
+                b / a,
+                ratio("toi_events"),
+                ratio("toi_bisection_queries"),
+                ratio("pair_tests"),
+                ratio("contacts"),
+                per_test(&small),
+                per_test(&large),
             );
         }
         md.push('\n');
