@@ -80,6 +80,11 @@ struct RunArgs {
     /// Never put resting systems to sleep (costs time; for measurements).
     #[arg(long)]
     no_sleep: bool,
+    /// Split large interaction groups into the parts that meet within a
+    /// step, checked against each other and merged where their paths meet:
+    /// smaller units for many ranks, more work on one (docs/architecture.md).
+    #[arg(long)]
+    split_groups: bool,
     /// Test aid: make rank R take F times longer per task, e.g. --slow-rank 2=3.0.
     #[arg(long, value_parser = parse_slow)]
     slow_rank: Vec<(i32, f64)>,
@@ -221,6 +226,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         no_render: cli.no_render,
         no_progress: cli.no_progress,
         no_sleep: cli.no_sleep,
+        split_groups: cli.split_groups,
         checkpoint_every: cli.checkpoint_every,
     };
     let mut scene = match rigidsim::scene::load(&cli.scene) {

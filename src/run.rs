@@ -26,6 +26,9 @@ pub struct RunOptions {
     pub no_render: bool,
     pub no_progress: bool,
     pub no_sleep: bool,
+    /// Split large interaction groups into the parts that interact within
+    /// a step (`World::split_groups`).
+    pub split_groups: bool,
     /// Write `checkpoint.bin` every this many simulated seconds (and at the end).
     pub checkpoint_every: Option<f64>,
 }
@@ -480,6 +483,7 @@ pub fn run_coordinator(
         None => {
             let mut world = World::new(scene);
             world.sleep_enabled = !opts.no_sleep;
+            world.split_groups = opts.split_groups;
             let traj = TrajectoryWriter::create(&traj_path).map_err(|e| io(e, "trajectory.csv"))?;
             (world, None, traj, Continued::New)
         }
@@ -492,7 +496,8 @@ pub fn run_coordinator(
                 ck.steps
             ));
             last_good = Some((ck.source().to_path_buf(), time));
-            let world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
+            let mut world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
+            world.split_groups = opts.split_groups;
             let (traj, continued) = TrajectoryWriter::resume(&traj_path, marks.trajectory, time)
                 .map_err(|e| io(e, &traj_path.display().to_string()))?;
             (world, Some(marks), traj, continued)

@@ -352,6 +352,48 @@ fn state_hash_and_trajectory_are_identical_on_1_2_3_and_5_ranks() {
     }
 }
 
+/// Large groups split into the parts that interact within each step
+/// (`--split-groups`) give the one-rank result on 3 ranks, with the
+/// split groups' first stage scattered in ranges and the parts stepped on
+/// the workers, and the same result as the groups stepped whole.
+#[test]
+fn split_groups_give_the_same_result_on_1_and_3_ranks() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    // 100 bodies in the bundled pour's box: a pile whose groups reach 79
+    // bodies in the first second, split into parts of at most 15.
+    let nuts = root.path().join("nuts_and_bolts_100.toml");
+    let bundled = std::fs::read_to_string(scene("nuts_and_bolts.toml")).unwrap();
+    assert!(
+        bundled.contains("\ncount = 20\n"),
+        "the bundled pour's count moved"
+    );
+    std::fs::write(&nuts, bundled.replace("\ncount = 20\n", "\ncount = 100\n")).unwrap();
+    let args = ["--duration", "1.0", "--force-distribute", "--no-render"];
+    let split = [&args[..], &["--split-groups"]].concat();
+    let whole = run(root.path(), "np1-whole", Ranks::Np(1), &nuts, &args);
+    let reference = run(root.path(), "np1-split", Ranks::Np(1), &nuts, &split);
+    assert!(
+        reference.count(&["counters", "group_reruns"]) > whole.count(&["counters", "group_reruns"]),
+        "no split parts met: {} against {} re-runs",
+        reference.count(&["counters", "group_reruns"]),
+        whole.count(&["counters", "group_reruns"])
+    );
+    assert!(
+        reference.count(&["counters", "largest_group"])
+            < whole.count(&["counters", "largest_group"]),
+        "the split made no smaller groups"
+    );
+    assert_same_result(&whole, &reference);
+    let other = run(root.path(), "np3-split", Ranks::Np(3), &nuts, &split);
+    assert!(
+        other.count(&["distributed", "groups_distributed"]) > 0,
+        "{}: no group step was distributed",
+        other.what
+    );
+    assert_same_result(&reference, &other);
+}
+
 #[test]
 fn distributed_island_solves_match_one_rank() {
     let _one = one_at_a_time();

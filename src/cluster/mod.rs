@@ -236,6 +236,15 @@ impl Executor for Polled<'_> {
         (self.poll)();
         self.inline.step_groups(st, params, inputs)
     }
+    fn prepare_groups(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<PreparedPairs> {
+        (self.poll)();
+        self.inline.prepare_groups(st, params, inputs)
+    }
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
         self.inline.finish()
     }
@@ -844,6 +853,20 @@ impl Executor for MpiExecutor<'_> {
         self.dist.distributable_s += self.clock.leave();
         r
     }
+
+    fn prepare_groups(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<PreparedPairs> {
+        self.clock.enter();
+        let mark = self.traffic_mark(Stage::StepGroups);
+        let r = self.prepare_groups_stage(st, params, inputs);
+        self.learn_traffic(Stage::StepGroups, mark);
+        self.dist.distributable_s += self.clock.leave();
+        r
+    }
 }
 
 impl MpiExecutor<'_> {
@@ -1050,6 +1073,79 @@ impl MpiExecutor<'_> {
 }
 
 impl MpiExecutor<'_> {
+    /// The first stage of each of these groups for all its pairs, before
+    /// they are split (`Executor::prepare_groups`): on rank 0 alone, or
+    /// each group's pairs cut into a range per rank and self-scheduled,
+    /// as for `prepare_large_groups`.
+    fn prepare_groups_stage(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<PreparedPairs> {
+        let costs: Vec<f64> = inputs
+            .iter()
+            .map(|i| i.predicted_s() * FIRST_STAGE_SHARE)
+            .collect();
+        let total: f64 = costs.iter().sum();
+        let pairs: usize = inputs.iter().map(GroupInput::pair_count).sum();
+        let modelled =
+            self.workers_for_stage(Stage::StepGroups, total, pairs, SELF_SCHEDULED_SHARE);
+        let workers = self
+            .group_choice
+            .workers(modelled, self.workers_without_link(total), pairs);
+        if workers == 0 {
+            let clock = Instant::now();
+            let prepared: Vec<PreparedPairs> = inputs
+                .iter()
+                .map(|input| prepare_pairs(st, input, (0, input.pair_count())))
+                .collect();
+            self.book[0].busy_s += clock.elapsed().as_secs_f64();
+            self.book[0].tasks_np += prepared.iter().map(PreparedPairs::tasks).sum::<u64>();
+            return prepared;
+        }
+        let ranks = workers + 1;
+        let mut shares: Vec<(usize, (usize, usize))> = Vec::new();
+        let mut share_costs = Vec::new();
+        for (g, input) in inputs.iter().enumerate() {
+            let n = input.pair_count();
+            let cuts = if n >= ranks * MIN_PREPARED_PAIRS {
+                ranks
+            } else {
+                1
+            };
+            for r in 0..cuts {
+                shares.push((g, (r * n / cuts, (r + 1) * n / cuts)));
+                share_costs.push(costs[g] / cuts as f64);
+            }
+        }
+        let (prepared, _, own) = self.self_schedule(
+            workers,
+            shares.clone(),
+            &share_costs,
+            |share| Req::PreparePairs {
+                params: params.clone(),
+                shares: share
+                    .into_iter()
+                    .map(|(g, range)| (inputs[g].clone(), range))
+                    .collect(),
+            },
+            |(g, range), _| prepare_pairs(st, &inputs[g], range),
+            |reply| match reply {
+                Reply::PreparePairs { prepared, busy_s } => Some((prepared, busy_s)),
+                _ => None,
+            },
+        );
+        for &i in &own {
+            self.book[0].tasks_np += prepared[i].tasks();
+        }
+        let mut by_group: Vec<Vec<PreparedPairs>> = (0..inputs.len()).map(|_| Vec::new()).collect();
+        for ((g, _), p) in shares.into_iter().zip(prepared) {
+            by_group[g].push(p);
+        }
+        by_group.into_iter().map(PreparedPairs::joined).collect()
+    }
+
     /// A group predicted to take more than its ranks' fair share cannot be
     /// balanced whole: the first stage of its step (each pair's end-of-step
     /// result and time of impact, `prepare_pairs`; about half of a pile's
@@ -1069,7 +1165,9 @@ impl MpiExecutor<'_> {
         let large: Vec<usize> = (0..inputs.len())
             .filter(|&g| {
                 let pairs = inputs[g].pair_count();
-                if self.force_distribute {
+                if inputs[g].is_prepared() {
+                    false
+                } else if self.force_distribute {
                     // Tests of determinism: every group that can be cut is.
                     pairs >= ranks
                 } else {

@@ -54,7 +54,8 @@ pub(super) fn step_world(
         touching: start_touching.iter().map(|t| (t.a.0, t.b.0)).collect(),
         body_cost: std::mem::take(&mut work.body_cost),
     };
-    let (runs, reruns) = group::step_groups(w.st, w, &start, exec)?;
+    let done = group::step_groups(w.st, w, &start, exec)?;
+    let runs = done.runs;
     work.body_cost = start.body_cost.clone();
     for g in &runs {
         let members = g.bodies.iter().filter(|b| b.is_dynamic()).count().max(1);
@@ -66,7 +67,14 @@ pub(super) fn step_world(
     }
     work.seconds += runs.iter().map(|g| g.busy_s).sum::<f64>();
     work.largest_seconds += runs.iter().map(|g| g.busy_s).fold(0.0, f64::max);
-    let merged = merge_groups(w, runs, reruns);
+    let mut merged = merge_groups(w, runs, done.reruns);
+    // The pairs between a split group's parts, which no part held, and
+    // what its first stage and the checks between its parts counted.
+    merged.pairs.extend(done.between);
+    merged.nested += done.stage.nested();
+    w.counters.add(&done.counters);
+    w.stage.narrowphase += done.stage.narrowphase;
+    w.stage.broadphase += done.stage.broadphase;
     w.stage.time_of_impact += clock.elapsed().as_secs_f64() - merged.nested;
     // Commit the end states, the contacts touching now and the caches.
     *touching = commit(w, start.end, merged, max_penetration);

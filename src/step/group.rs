@@ -261,6 +261,7 @@ pub(crate) fn group_input(
     GroupInput {
         predicted_s,
         prepared: None,
+        keep_paths: false,
         bodies: ids
             .iter()
             .map(|&w| world.bodies[w as usize].clone())
@@ -294,6 +295,9 @@ pub(crate) struct GroupState {
     /// The first stage's answers, when computed beforehand in shares
     /// (`prepare_pairs`); `None`: the step computes them.
     pub prepared: Option<PreparedPairs>,
+    /// Whether the step returns the segments its bodies took
+    /// (`GroupOutput::paths`): a part of a split group does.
+    pub keep_paths: bool,
 }
 
 /// The first stage of a group's step for some of its pairs: their
@@ -394,6 +398,7 @@ pub struct GroupParams {
     sleep_enabled: bool,
     sleep_after: f64,
     group_margin: f64,
+    split_groups: bool,
 }
 
 impl GroupParams {
@@ -407,6 +412,7 @@ impl GroupParams {
             sleep_enabled: w.sleep_enabled,
             sleep_after: w.sleep_after,
             group_margin: w.group_margin,
+            split_groups: w.split_groups,
         }
     }
 
@@ -419,6 +425,7 @@ impl GroupParams {
             sleep_enabled: st.sleep_enabled,
             sleep_after: st.sleep_after,
             group_margin: st.group_margin,
+            split_groups: st.split_groups,
         }
     }
 
@@ -435,6 +442,7 @@ impl GroupParams {
             sleep_enabled: self.sleep_enabled,
             sleep_after: self.sleep_after,
             group_margin: self.group_margin,
+            split_groups: self.split_groups,
         }
     }
 }
@@ -462,6 +470,8 @@ pub struct GroupInput {
     predicted_s: f64,
     /// Its first stage, when computed beforehand (`GroupState::prepared`).
     prepared: Option<PreparedPairs>,
+    /// Whether its step returns its bodies' segments (`GroupState::keep_paths`).
+    keep_paths: bool,
 }
 
 impl GroupInput {
@@ -473,6 +483,11 @@ impl GroupInput {
     /// Its candidate pairs (the first stage's tasks).
     pub fn pair_count(&self) -> usize {
         self.pairs.len()
+    }
+
+    /// Whether its first stage was computed beforehand.
+    pub fn is_prepared(&self) -> bool {
+        self.prepared.is_some()
     }
 
     /// Hands the step its first stage, computed beforehand for all its
@@ -511,6 +526,11 @@ pub struct GroupOutput {
     /// V-Clip tasks of its first stage run beforehand (`PreparedPairs`):
     /// in `counters`, but counted where they ran.
     pub(crate) prepared_tasks: u64,
+    /// Where asked for (`GroupState::keep_paths`): the segments each body
+    /// that left its predicted path took, in time order (world id; the
+    /// first is its segment at the step's start, each later one begins at
+    /// the event that rolled it back).
+    pub(crate) paths: Vec<(u32, Vec<Segment>)>,
 }
 
 impl GroupOutput {
@@ -593,6 +613,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         spin_resolves,
         predicted_s: _,
         prepared,
+        keep_paths,
     } = input;
     let clock = std::time::Instant::now();
     // A first stage run beforehand is part of what the group cost.
@@ -622,6 +643,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         together,
         spin_resolves: SpinResolves(spin_resolves),
         prepared,
+        keep_paths,
     };
     let output = step_group(region, state, exec).map(|mut out| {
         out.busy_s = clock.elapsed().as_secs_f64() + prepared_s;
@@ -679,14 +701,306 @@ fn find_leaks(
     leaks
 }
 
+/// Dynamic members from which a group is split into the parts its pairs'
+/// first stage says interact (`split_group`). A pile is one group by its
+/// swept spheres (every body near another), but most of its bodies meet
+/// few of the others within a step: in the 1000-body pour's pile (one
+/// group of about 600 moving bodies from 1.0 s to 1.1 s) the parts
+/// number 320-400, the largest 21-77 bodies. Below this a group is cheap
+/// enough whole.
+pub const SPLIT_MIN_MEMBERS: usize = 16;
+
+/// A group split into parts (`split_group`): what the parts' runs are
+/// checked against (`check_parts`).
+struct Family {
+    /// Its dynamic members (sorted).
+    members: Vec<u32>,
+    /// Each of its pairs (index into `StepStart::pairs`) with its first
+    /// stage: the end-of-step result and time of impact along the
+    /// predicted paths.
+    first: BTreeMap<usize, (PairResult, Option<f64>)>,
+    /// Wall seconds its first stage took (shared over its parts by pairs).
+    busy_s: f64,
+}
+
+impl Family {
+    /// The part of its first stage a plan of its members steps from.
+    fn prepared(&self, pairs: &[usize]) -> PreparedPairs {
+        let (results, toi) = pairs.iter().map(|k| self.first[k].clone()).unzip();
+        PreparedPairs {
+            results,
+            toi,
+            busy_s: self.busy_s * pairs.len() as f64 / self.first.len().max(1) as f64,
+            ..Default::default()
+        }
+    }
+}
+
+/// What the step's groups leave.
+pub(crate) struct GroupsDone {
+    /// The groups' runs, in group-id order.
+    pub runs: Vec<GroupOutput>,
+    /// Groups stepped again from the step's start (`Counters::group_reruns`).
+    pub reruns: u64,
+    /// End-of-step results of the pairs between the parts of split groups
+    /// (world keys), which no part held.
+    pub between: Vec<(PairKey, PairResult)>,
+    /// What the split groups' first stages and the checks between their
+    /// parts counted and took (their nested stages).
+    pub counters: Counters,
+    pub stage: StageSeconds,
+}
+
+/// The parts of a large group (`SPLIT_MIN_MEMBERS`): the connected
+/// components of its bodies under what its first stage says interacts
+/// within the step along the predicted paths: bodies solved together or
+/// touching at the step's start, a resting system whole, and each pair
+/// that has a time of impact or ends the step touching. Its other pairs
+/// lie between parts; `check_parts` tests them against the paths the
+/// parts took, and parts whose bodies meet merge and step again.
+fn split_group(
+    world: &Region,
+    start: &StepStart,
+    plan: &GroupPlan,
+    family: &Family,
+) -> Vec<GroupPlan> {
+    let n = world.bodies.len();
+    let dynamic = |i: u32| {
+        let b = &world.bodies[i as usize];
+        b.is_dynamic() && b.activity != Activity::Fallen
+    };
+    let mut sets = DisjointSets::new(n);
+    for bodies in &start.together {
+        for w in bodies.windows(2) {
+            sets.union(w[0] as u32, w[1] as u32);
+        }
+    }
+    for &(a, b) in &start.touching {
+        if dynamic(a) && dynamic(b) {
+            sets.union(a, b);
+        }
+    }
+    for &i in &plan.members {
+        if world.bodies[i as usize].activity == Activity::Sleeping {
+            sets.union(i, world.sleep_group[i as usize]);
+        }
+    }
+    for (&k, (r, toi)) in &family.first {
+        let (a, b) = start.pairs[k];
+        if dynamic(a) && dynamic(b) && (toi.is_some() || r.penetrating || !r.contacts.is_empty()) {
+            sets.union(a, b);
+        }
+    }
+    let mut parts: BTreeMap<u32, GroupPlan> = BTreeMap::new();
+    for &i in &plan.members {
+        parts.entry(sets.find(i)).or_default().members.push(i);
+    }
+    for &k in &plan.pairs {
+        let (a, b) = start.pairs[k];
+        let root = match (dynamic(a), dynamic(b)) {
+            (true, true) if sets.find(a) != sets.find(b) => continue,
+            (true, _) => sets.find(a),
+            (false, true) => sets.find(b),
+            (false, false) => continue,
+        };
+        let part = parts.get_mut(&root).expect("a pair's body is a member");
+        part.pairs.push(k);
+        for x in [a, b] {
+            if !dynamic(x) {
+                part.neighbours.push(x);
+            }
+        }
+    }
+    let mut plans: Vec<GroupPlan> = parts.into_values().collect();
+    for p in &mut plans {
+        p.neighbours.extend(&plan.neighbours);
+        p.neighbours.sort_unstable();
+        p.neighbours.dedup();
+    }
+    plans
+}
+
+/// The pairs of `family` among `members` (sorted world ids): both dynamic
+/// bodies among them, or its one dynamic body.
+fn family_pairs(world: &Region, start: &StepStart, family: &Family, members: &[u32]) -> Vec<usize> {
+    let inside = |x: u32| members.binary_search(&x).is_ok();
+    let dynamic = |x: u32| {
+        let b = &world.bodies[x as usize];
+        b.is_dynamic() && b.activity != Activity::Fallen
+    };
+    family
+        .first
+        .keys()
+        .copied()
+        .filter(|&k| {
+            let (a, b) = start.pairs[k];
+            [a, b].iter().all(|&x| !dynamic(x) || inside(x)) && [a, b].iter().any(|&x| inside(x))
+        })
+        .collect()
+}
+
+/// Tests the pairs between the parts of a split group against the paths
+/// the parts took: each pair whose bodies' realised swept spheres meet and
+/// one of which left its prediction (`paths_meet`), unless neither part
+/// ran since the last check (`fresh`: their paths are the ones checked
+/// then). Adds the parts that met (indices into the plans) to `meets` and
+/// the end-of-step results of the pairs between parts that did not to
+/// `between`.
+#[allow(clippy::too_many_arguments)]
+fn check_parts(
+    st: &StepStatic,
+    world: &Region,
+    start: &StepStart,
+    family: &Family,
+    (owner, fresh): (&[Option<usize>], &[bool]),
+    paths: &[Option<&[Segment]>],
+    meets: &mut Vec<(usize, usize)>,
+    between: &mut BTreeMap<PairKey, PairResult>,
+    done: &mut GroupsDone,
+) {
+    let part = |i: u32| owner[i as usize].expect("a member has a part");
+    if !family.members.iter().any(|&i| fresh[part(i)]) {
+        return;
+    }
+    let h = st.settings.dt;
+    let left = |i: u32| paths[i as usize].is_some();
+    let dynamic = |x: u32| {
+        let b = &world.bodies[x as usize];
+        b.is_dynamic() && b.activity != Activity::Fallen
+    };
+    // Pairs between parts along the predicted paths: the first stage's
+    // answer stands where neither body left its prediction.
+    for (&k, (r, _)) in &family.first {
+        let (a, b) = start.pairs[k];
+        if dynamic(a) && dynamic(b) && part(a) != part(b) && !left(a) && !left(b) {
+            between.insert((a, b), r.clone());
+        }
+    }
+    let mut proxies = Vec::new();
+    for &i in &family.members {
+        let w = i as usize;
+        match paths[w] {
+            Some(path) => {
+                for (j, piece) in path.iter().enumerate() {
+                    let until = path.get(j + 1).map_or(h, |p| p.time);
+                    let to = world.integrate_segment(w, piece, until - piece.time);
+                    world.push_swept(&mut proxies, i, w, &piece.state, &to);
+                }
+            }
+            None => world.push_swept(&mut proxies, i, w, &start.seg[w].state, &start.end[w]),
+        }
+    }
+    let pairs = broadphase::candidate_pairs(&proxies, |a, b| {
+        let (p, q) = (part(a), part(b));
+        p != q && (fresh[p] || fresh[q]) && (left(a) || left(b))
+    });
+    for (a, b) in pairs {
+        let path =
+            |i: u32| paths[i as usize].unwrap_or(std::slice::from_ref(&start.seg[i as usize]));
+        match paths_meet(st, world, start, (a, b), [path(a), path(b)], done) {
+            Some(r) => {
+                between.insert((a, b), r);
+            }
+            None => meets.push((part(a), part(b))),
+        }
+    }
+}
+
+/// Whether two bodies' realised paths (their segments in time order) meet
+/// within the step as the group step would have seen it: an impact on any
+/// stretch where both keep their segments (`time_of_impact_within`), or
+/// the two touching at an instant where one of them was rolled back (an
+/// event there would have solved them together). `None` where they meet,
+/// else the pair's result at the step's end.
+fn paths_meet(
+    st: &StepStatic,
+    world: &Region,
+    start: &StepStart,
+    (a, b): PairKey,
+    paths: [&[Segment]; 2],
+    done: &mut GroupsDone,
+) -> Option<PairResult> {
+    let h = st.settings.dt;
+    let mut bodies = vec![
+        world.bodies[a as usize].clone(),
+        world.bodies[b as usize].clone(),
+    ];
+    for (body, path) in bodies.iter_mut().zip(paths) {
+        if path.len() > 1 {
+            body.activity = Activity::Awake;
+        }
+    }
+    let mut g = Region {
+        st,
+        ids: vec![a, b],
+        bodies,
+        features: world
+            .features
+            .get(&(a, b))
+            .map(|f| ((0, 1), f.clone()))
+            .into_iter()
+            .collect(),
+        warm: BTreeMap::new(),
+        sleep_timer: vec![world.sleep_timer[a as usize], world.sleep_timer[b as usize]],
+        sleep_group: vec![world.sleep_group[a as usize], world.sleep_group[b as usize]],
+        counters: Counters::default(),
+        stage: StageSeconds::default(),
+        impacts: Vec::new(),
+        pair_forces: BTreeMap::new(),
+        integrated: Default::default(),
+    };
+    let since: SolvedSince = start
+        .since
+        .get(&(a, b))
+        .map(|s| ((0, 1), *s))
+        .into_iter()
+        .collect();
+    let mut times: Vec<f64> = paths
+        .iter()
+        .flat_map(|p| p.iter().map(|s| s.time))
+        .filter(|&t| t > 0.0 && t < h)
+        .chain([0.0, h])
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let piece =
+        |path: &[Segment], t: f64| *path.iter().rev().find(|s| s.time <= t).unwrap_or(&path[0]);
+    let mut result = None;
+    for w in times.windows(2) {
+        let (from, to) = (w[0], w[1]);
+        let seg = [piece(paths[0], from), piece(paths[1], from)];
+        if from > 0.0 {
+            let r = g.query_at(0, 1, &seg, from);
+            if r.penetrating || !r.contacts.is_empty() {
+                result = None;
+                break;
+            }
+        }
+        let r = g.query_at(0, 1, &seg, to);
+        if g.time_of_impact_within((0, 1), &r, &seg, (from, to), &since)
+            .is_some()
+        {
+            result = None;
+            break;
+        }
+        result = Some(r);
+    }
+    done.counters.add(&g.counters);
+    done.stage.narrowphase += g.stage.narrowphase;
+    done.stage.broadphase += g.stage.broadphase;
+    result
+}
+
 /// Runs every group of the step and re-runs merged ones until no realised
-/// path leaves its group; returns the runs in group-id order.
+/// path leaves its group; returns the runs in group-id order. A large
+/// group is split first (`split_group`) and its parts' paths checked
+/// against each other (`check_parts`).
 pub(crate) fn step_groups<'s>(
     st: &'s StepStatic<'s>,
     world: &Region<'s>,
     start: &StepStart,
     exec: &mut dyn Executor,
-) -> Result<(Vec<GroupOutput>, u64), NumericalFailure> {
+) -> Result<GroupsDone, NumericalFailure> {
     let n = world.bodies.len();
     let index = StartIndex {
         features: PairIndex::new(n, world.features.keys()),
@@ -702,17 +1016,87 @@ pub(crate) fn step_groups<'s>(
                 .iter(),
         ),
     };
-    let mut plans = plan_groups(world, start);
-    let mut runs: Vec<Option<GroupOutput>> = (0..plans.len()).map(|_| None).collect();
     let params = GroupParams::of(st);
-    let mut reruns = 0u64;
+    let mut done = GroupsDone {
+        runs: Vec::new(),
+        reruns: 0,
+        between: Vec::new(),
+        counters: Counters::default(),
+        stage: StageSeconds::default(),
+    };
+    // The large groups' first stage, through the executor, then their parts.
+    let whole = plan_groups(world, start);
+    let large: Vec<usize> = (0..whole.len())
+        .filter(|&p| st.split_groups && whole[p].members.len() >= SPLIT_MIN_MEMBERS)
+        .collect();
+    let inputs = large
+        .iter()
+        .map(|&p| group_input(world, start, &index, &whole[p]))
+        .collect();
+    let mut first: BTreeMap<usize, PreparedPairs> = large
+        .into_iter()
+        .zip(exec.prepare_groups(st, &params, inputs))
+        .collect();
+    let mut families: Vec<Family> = Vec::new();
+    let mut family_of: Vec<Option<usize>> = vec![None; n];
+    let mut plans = Vec::new();
+    for (p, plan) in whole.into_iter().enumerate() {
+        let Some(prepared) = first.remove(&p) else {
+            plans.push(plan);
+            continue;
+        };
+        done.counters.add(&prepared.counters);
+        done.stage.narrowphase += prepared.stage.narrowphase;
+        let family = Family {
+            members: plan.members.clone(),
+            first: plan
+                .pairs
+                .iter()
+                .copied()
+                .zip(prepared.results.into_iter().zip(prepared.toi))
+                .collect(),
+            busy_s: prepared.busy_s,
+        };
+        for &i in &plan.members {
+            family_of[i as usize] = Some(families.len());
+        }
+        plans.extend(split_group(world, start, &plan, &family));
+        families.push(family);
+    }
+    plans.sort_by_key(GroupPlan::id);
+    // The family all of a plan's members belong to, if one does.
+    let one_family = |plan: &GroupPlan| {
+        let f = family_of[plan.members[0] as usize]?;
+        plan.members
+            .iter()
+            .all(|&i| family_of[i as usize] == Some(f))
+            .then_some(f)
+    };
+    let mut runs: Vec<Option<GroupOutput>> = (0..plans.len()).map(|_| None).collect();
+    // Results of the pairs between parts checked so far (`check_parts`).
+    let mut between: BTreeMap<PairKey, PairResult> = BTreeMap::new();
     loop {
         // Every group still to step, through the executor (inline, or
         // scattered over the workers); answers come back in group order.
         let todo: Vec<usize> = (0..plans.len()).filter(|&p| runs[p].is_none()).collect();
+        let mut fresh = vec![false; plans.len()];
+        for &p in &todo {
+            fresh[p] = true;
+        }
         let inputs = todo
             .iter()
-            .map(|&p| group_input(world, start, &index, &plans[p]))
+            .map(|&p| {
+                let plan = &plans[p];
+                let mut input = group_input(world, start, &index, plan);
+                if let Some(f) = one_family(plan) {
+                    input.prepared = Some(families[f].prepared(&plan.pairs));
+                }
+                input.keep_paths = plan
+                    .members
+                    .iter()
+                    .any(|&i| family_of[i as usize].is_some());
+                input
+            })
             .collect();
         for (p, reply) in todo.into_iter().zip(exec.step_groups(st, &params, inputs)) {
             let output = reply.0.expect("every group answered")?;
@@ -724,14 +1108,43 @@ pub(crate) fn step_groups<'s>(
                 owner[i as usize] = Some(p);
             }
         }
+        let mut paths: Vec<Option<&[Segment]>> = vec![None; n];
+        for run in runs.iter().flatten() {
+            for (i, path) in &run.paths {
+                paths[*i as usize] = Some(path);
+            }
+        }
+        // What was checked between parts that have not run again stands.
+        between.retain(|&(a, b), _| match (owner[a as usize], owner[b as usize]) {
+            (Some(p), Some(q)) => p != q && !fresh[p] && !fresh[q],
+            _ => false,
+        });
+        let mut meets = Vec::new();
+        for family in &families {
+            check_parts(
+                st,
+                world,
+                start,
+                family,
+                (&owner, &fresh),
+                &paths,
+                &mut meets,
+                &mut between,
+                &mut done,
+            );
+        }
         let leaks = find_leaks(n, start, &plans, &runs, &owner);
-        if leaks.is_empty() {
+        if leaks.is_empty() && meets.is_empty() {
+            done.between = between.into_iter().collect();
             break;
         }
         // Merge: groups that met become one (the lowest index keeps the
         // plan); outside bodies join the group that met them.
         let mut sets = DisjointSets::new(plans.len());
         let mut joins: BTreeMap<usize, BTreeSet<u32>> = BTreeMap::new();
+        for (p, q) in meets {
+            sets.union(p as u32, q as u32);
+        }
         for (p, leak) in leaks {
             match leak {
                 Leak::Group(q) => sets.union(p as u32, q as u32),
@@ -772,13 +1185,26 @@ pub(crate) fn step_groups<'s>(
         for (root, mut m) in merged {
             m.members.sort_unstable();
             m.members.dedup();
+            if changed.contains(&root) {
+                // The pairs between merged parts of a split group are the
+                // merged group's own now.
+                let involved: BTreeSet<usize> = m
+                    .members
+                    .iter()
+                    .filter_map(|&i| family_of[i as usize])
+                    .collect();
+                for f in involved {
+                    m.pairs
+                        .extend(family_pairs(world, start, &families[f], &m.members));
+                }
+            }
             m.neighbours.sort_unstable();
             m.neighbours.dedup();
             m.pairs.sort_unstable();
             m.pairs.dedup();
             plans.push(m);
             if changed.contains(&root) {
-                reruns += 1;
+                done.reruns += 1;
                 runs.push(None);
             } else {
                 runs.push(old_runs[root as usize].take());
@@ -797,12 +1223,11 @@ pub(crate) fn step_groups<'s>(
             runs.push(run);
         }
     }
-    Ok((
-        runs.into_iter()
-            .map(|r| r.expect("every group ran"))
-            .collect(),
-        reruns,
-    ))
+    done.runs = runs
+        .into_iter()
+        .map(|r| r.expect("every group ran"))
+        .collect();
+    Ok(done)
 }
 
 /// World ids of a group's touching contacts, impacts and warm starts.

@@ -245,6 +245,7 @@ pub(crate) fn step_group(
         together: mut solved_together,
         mut spin_resolves,
         prepared,
+        keep_paths,
     } = s;
     // narrowphase: the group's pairs at the end of the step (unless they
     // were answered beforehand, with their times of impact).
@@ -304,6 +305,12 @@ pub(crate) fn step_group(
         };
     // Which bodies have left their predicted path (rolled back or woken).
     let mut left = vec![false; n];
+    // The segments each body took, where asked for (`GroupOutput::paths`).
+    let mut paths: Vec<Vec<Segment>> = if keep_paths {
+        seg.iter().map(|s| vec![*s]).collect()
+    } else {
+        Vec::new()
+    };
     let mut pieces: Vec<SphereProxy> = Vec::new();
     let mut events = 0usize;
     let mut accepted: BTreeSet<PairKey> = BTreeSet::new();
@@ -400,6 +407,11 @@ pub(crate) fn step_group(
         let solved = g.contact_phase(exec, &touching_now, &members, &mut seg, h - tau);
         solved_together.record(&solved);
         spin_resolves.schedule(&solved, &members, tau, h);
+        if keep_paths {
+            for &i in &members {
+                paths[i].push(seg[i]);
+            }
+        }
         super::check_states(
             members.iter().map(|&i| (g.ids[i] as usize, &seg[i].state)),
             "solve_islands",
@@ -434,7 +446,12 @@ pub(crate) fn step_group(
     g.counters.toi_events += events as u64;
     g.stage.time_of_impact += clock.elapsed().as_secs_f64() - (g.stage.nested() - nested_before);
     let (pairs, results) = book.results.into_iter().unzip();
+    let paths = (0..paths.len())
+        .filter(|&i| left[i])
+        .map(|i| (g.ids[i], std::mem::take(&mut paths[i])))
+        .collect();
     Ok(GroupOutput {
+        paths,
         ids: g.ids,
         bodies: g.bodies,
         sleep_timer: g.sleep_timer,

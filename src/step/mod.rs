@@ -38,7 +38,7 @@ pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
 pub(crate) use contact::{Touching, WarmContact};
 pub use group::{
     GROUP_MARGIN, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PreparedPairs,
-    prepare_pairs, run_group,
+    SPLIT_MIN_MEMBERS, prepare_pairs, run_group,
 };
 pub use region::StepStatic;
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
@@ -67,6 +67,15 @@ pub trait Executor {
         params: &GroupParams,
         inputs: Vec<GroupInput>,
     ) -> Vec<GroupReply>;
+    /// The first stage of each group's step for all its pairs
+    /// (`group::prepare_pairs`), answers in the order of `inputs`: what a
+    /// large group is split by (`group::split_group`).
+    fn prepare_groups(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<PreparedPairs>;
     /// Ends the run on every rank; returns the per-rank accounts and how often
     /// each stage was distributed.
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution);
@@ -121,6 +130,23 @@ impl Executor for Inline {
             .collect();
         self.dist.distributable_s += self.clock.leave();
         replies
+    }
+    fn prepare_groups(
+        &mut self,
+        st: &StepStatic,
+        _params: &GroupParams,
+        inputs: Vec<GroupInput>,
+    ) -> Vec<PreparedPairs> {
+        self.clock.enter();
+        let clock = Instant::now();
+        let prepared: Vec<PreparedPairs> = inputs
+            .iter()
+            .map(|input| group::prepare_pairs(st, input, (0, input.pair_count())))
+            .collect();
+        self.narrowphase_tasks += prepared.iter().map(PreparedPairs::tasks).sum::<u64>();
+        self.busy_s += clock.elapsed().as_secs_f64();
+        self.dist.distributable_s += self.clock.leave();
+        prepared
     }
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
         let me = RankSummary {
@@ -187,6 +213,11 @@ pub struct World {
     /// groups are formed (`group::GROUP_MARGIN` by default; results do not
     /// depend on it, a test compares).
     pub group_margin: f64,
+    /// Splits large groups into the parts that interact within the step
+    /// (`group::split_group`; off by default, `--split-groups`): the same
+    /// answers where the parts meet nothing else, more work on one rank,
+    /// smaller units to share over many.
+    pub split_groups: bool,
     pub(crate) touching: Vec<Touching>,
     /// Contacts of the impacts solved during the last step, for the
     /// separating-pair skip (only an optimisation: not checkpointed).
@@ -224,6 +255,7 @@ impl World {
             warm_start: true,
             iterative_min_rows: solver::ITERATIVE_MIN_ROWS,
             group_margin: group::GROUP_MARGIN,
+            split_groups: false,
             touching: Vec::new(),
             impacts: Vec::new(),
             group_work: GroupWork::new(n),

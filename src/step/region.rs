@@ -39,6 +39,8 @@ pub struct StepStatic<'s> {
     pub(crate) sleep_after: f64,
     /// `World::group_margin`.
     pub(crate) group_margin: f64,
+    /// `World::split_groups`.
+    pub(crate) split_groups: bool,
 }
 
 /// A body pair in local indices, `a < b`.

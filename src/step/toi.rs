@@ -85,8 +85,23 @@ impl Region<'_> {
         h: f64,
         since: &SolvedSince,
     ) -> Option<f64> {
+        let start = seg[k.0 as usize].time.max(seg[k.1 as usize].time);
+        self.time_of_impact_within(k, r, seg, (start, h), since)
+    }
+
+    /// Time of impact of one pair between `lo` and `hi` (both bodies on
+    /// their segments there; `r` is the pair's result at `hi`), if it
+    /// overlaps (or a fast pair crossed) beyond what it carried: the same
+    /// search as `time_of_impact`, on a stretch of the step.
+    pub(crate) fn time_of_impact_within(
+        &mut self,
+        k: PairKey,
+        r: &PairResult,
+        seg: &[Segment],
+        (start, h): (f64, f64),
+        since: &SolvedSince,
+    ) -> Option<f64> {
         let (a, b) = (k.0 as usize, k.1 as usize);
-        let start = seg[a].time.max(seg[b].time);
         let since = since.get(&k).copied();
         let end_overlaps = self.overlaps_more((a, b), r, h, seg, since);
         let interval =
@@ -506,7 +521,7 @@ impl Region<'_> {
 
     /// The pair at time `t`, with contact points (their depth tells an
     /// overlap carried into the segment from a new one).
-    fn query_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> PairResult {
+    pub(crate) fn query_at(&mut self, a: usize, b: usize, seg: &[Segment], t: f64) -> PairResult {
         self.query_task_at(a, b, seg, t).0
     }
 
