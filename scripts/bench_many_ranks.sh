@@ -18,6 +18,8 @@
 #                                  into target/bench-tiny/ (CI: it cannot rot)
 # Knobs: RANKS="1 2 4 8 16" SCENES="200 1000" REPS=3 REPS1000=1
 #        DURATION200=2 DURATION1000=1 RUN_LIMIT=600 (seconds a run may take)
+#        SPLIT=1: each run also with --split-groups (its own table, scene
+#        crowdN-split)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$(pwd)
@@ -69,6 +71,9 @@ for r in $RANKS; do
     echo "bench_many_ranks: $r ranks left out ($cores cores here)"; fi
 done
 
+# Each run whole, and with SPLIT=1 also split (`--split-groups`).
+variants=("")
+if [ "${SPLIT:-0}" = 1 ]; then variants+=("-split"); fi
 source scripts/crowd.sh
 manifest=$out/manifest.csv
 echo "series,bodies,ranks,variant,rep,dir" >"$manifest"
@@ -82,16 +87,18 @@ for rep in $(seq 1 "$max_reps"); do
     if [ "$n" = 1000 ]; then reps=$REPS1000; duration=$DURATION1000; fi
     [ "$rep" -le "$reps" ] || continue
     for r in "${ranks[@]}"; do
-      name=crowd$n-$r-$rep
-      echo "bench_many_ranks: crowd$n, $r rank(s), rep $rep ($(( $(date +%s) - started )) s so far)"
-      rm -rf "${out:?}/runs/$name"
-      timeout "$RUN_LIMIT" mpirun -np "$r" "$tmp/rigidsim" "$tmp/crowd$n.toml" \
-        --duration "$duration" --no-render --no-progress --sample-every 0.5 \
-        --out "$out/runs/$name" >/dev/null 2>&1 ||
-        echo "bench_many_ranks: run failed or cut off (crowd$n, $r ranks)"
-      # Only the summary is kept (the trajectories are megabytes).
-      find "$out/runs/$name" -type f ! -name summary.json -delete 2>/dev/null || true
-      echo "many_ranks,$n,$r,crowd$n,$rep,runs/$name" >>"$manifest"
+      for split in "${variants[@]}"; do
+        name=crowd$n$split-$r-$rep
+        echo "bench_many_ranks: crowd$n$split, $r rank(s), rep $rep ($(( $(date +%s) - started )) s so far)"
+        rm -rf "${out:?}/runs/$name"
+        timeout "$RUN_LIMIT" mpirun -np "$r" "$tmp/rigidsim" "$tmp/crowd$n.toml" \
+          --duration "$duration" --no-render --no-progress --sample-every 0.5 \
+          ${split:+--split-groups} --out "$out/runs/$name" >/dev/null 2>&1 ||
+          echo "bench_many_ranks: run failed or cut off (crowd$n$split, $r ranks)"
+        # Only the summary is kept (the trajectories are megabytes).
+        find "$out/runs/$name" -type f ! -name summary.json -delete 2>/dev/null || true
+        echo "many_ranks,$n,$r,crowd$n$split,$rep,runs/$name" >>"$manifest"
+      done
     done
   done
 done
