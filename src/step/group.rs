@@ -1176,6 +1176,32 @@ pub(crate) fn step_groups<'s>(
                 }
             }
         }
+        // A split group whose parts merge into one holding more than half
+        // its bodies steps whole: its parts would go on meeting, and each
+        // round's runs of the growing part would be lost.
+        let mut in_family: BTreeMap<(usize, u32), usize> = BTreeMap::new();
+        for (p, plan) in plans.iter().enumerate() {
+            for &i in &plan.members {
+                if let Some(f) = family_of[i as usize] {
+                    *in_family.entry((f, sets.find(p as u32))).or_default() += 1;
+                }
+            }
+        }
+        for (f, family) in families.iter().enumerate() {
+            let most = in_family
+                .range((f, 0)..=(f, u32::MAX))
+                .map(|(_, &k)| k)
+                .max()
+                .unwrap_or(0);
+            if 2 * most > family.members.len() {
+                let parts: Vec<usize> = (0..plans.len())
+                    .filter(|&p| family_of[plans[p].members[0] as usize] == Some(f))
+                    .collect();
+                for w in parts.windows(2) {
+                    sets.union(w[0] as u32, w[1] as u32);
+                }
+            }
+        }
         let mut merged: BTreeMap<u32, GroupPlan> = BTreeMap::new();
         let mut changed: BTreeSet<u32> = BTreeSet::new();
         for (p, plan) in plans.iter().enumerate() {
