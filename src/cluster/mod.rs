@@ -1114,6 +1114,9 @@ impl MpiExecutor<'_> {
             } else {
                 1
             };
+            if cuts > 1 {
+                self.dist.groups_prepared += 1;
+            }
             for r in 0..cuts {
                 shares.push((g, (r * n / cuts, (r + 1) * n / cuts)));
                 share_costs.push(costs[g] / cuts as f64);

@@ -147,7 +147,8 @@ pub struct Distribution {
     /// Of `solve_distributed`, the same for the island solves.
     pub solves_by_measure: u64,
     /// Groups too large to share out whole whose first stage went out in
-    /// ranges of their pairs before they stepped (`PreparePairs`).
+    /// ranges of their pairs before they stepped (`PreparePairs`), and
+    /// groups to be split whose first stage did (`--split-groups`).
     pub groups_prepared: u64,
     pub message_latency_s: f64,
     /// Wall seconds rank 0 spent inside the stages that go to other ranks
