@@ -305,6 +305,18 @@ position = [0.6, 0.0, 0.11]
 angular_velocity = [0.0, 0.0, 2.0]
 "#;
 
+/// The bundled pour with 100 bodies in its box, written under `root`.
+fn pour_of_100(root: &Path) -> PathBuf {
+    let nuts = root.join("nuts_and_bolts_100.toml");
+    let bundled = std::fs::read_to_string(scene("nuts_and_bolts.toml")).unwrap();
+    assert!(
+        bundled.contains("\ncount = 20\n"),
+        "the bundled pour's count moved"
+    );
+    std::fs::write(&nuts, bundled.replace("\ncount = 20\n", "\ncount = 100\n")).unwrap();
+    nuts
+}
+
 fn five_islands(root: &Path) -> PathBuf {
     let path = root.join("five_islands.toml");
     std::fs::write(&path, FIVE_ISLANDS).expect("writing the five-islands scene");
@@ -362,13 +374,7 @@ fn split_groups_give_the_same_result_on_1_and_3_ranks() {
     let root = temp_root();
     // 100 bodies in the bundled pour's box: a pile whose groups reach 79
     // bodies in the first second, split into parts of at most 15.
-    let nuts = root.path().join("nuts_and_bolts_100.toml");
-    let bundled = std::fs::read_to_string(scene("nuts_and_bolts.toml")).unwrap();
-    assert!(
-        bundled.contains("\ncount = 20\n"),
-        "the bundled pour's count moved"
-    );
-    std::fs::write(&nuts, bundled.replace("\ncount = 20\n", "\ncount = 100\n")).unwrap();
+    let nuts = pour_of_100(root.path());
     let args = ["--duration", "1.0", "--force-distribute", "--no-render"];
     let split = [&args[..], &["--split-groups"]].concat();
     let whole = run(root.path(), "np1-whole", Ranks::Np(1), &nuts, &args);
@@ -692,13 +698,7 @@ fn slowed_rank_gets_work_in_proportion_to_its_speed() {
     // ranks share a core decided the rest: one run in three gave the
     // slowed rank more chunks than rank 1 and 0.61–0.70 of its cost (at
     // 60 bodies 0.32–0.50 in 28 runs, at 100 0.34–0.44 in 8).
-    let nuts = root.path().join("nuts_and_bolts_100.toml");
-    let bundled = std::fs::read_to_string(scene("nuts_and_bolts.toml")).unwrap();
-    assert!(
-        bundled.contains("\ncount = 20\n"),
-        "the bundled pour's count moved"
-    );
-    std::fs::write(&nuts, bundled.replace("\ncount = 20\n", "\ncount = 100\n")).unwrap();
+    let nuts = pour_of_100(root.path());
     // 2 s: enough distributed frames for the smoothed speeds to settle on
     // 2 shared cores (with 1 s, one run in four fell out of the band).
     let args = ["--duration", "2.0", "--force-distribute", "--no-render"];

@@ -59,6 +59,17 @@ fn pile(x: f64) -> String {
     s
 }
 
+/// A pour of 40 bodies, and two late bodies that land on it once it
+/// rests (from 6 m and 9 m).
+fn pour_with_late_bodies() -> String {
+    format!(
+        "{OBJECTS}[[scatter]]\nobjects = [\"nut\", \"bolt\"]\ncount = 40\n\
+         min = [-0.15, -0.15, 0.05]\nmax = [0.15, 0.15, 0.6]\nseed = 3\nrandom_orientation = true\n\
+         [[bodies]]\nobject = \"bolt\"\nposition = [0.02, 0.0, 6.0]\n\
+         [[bodies]]\nobject = \"nut\"\nposition = [-0.05, 0.03, 9.0]\n"
+    )
+}
+
 fn run(scene: &str) -> World {
     let mut w = world(scene);
     run_until(&mut w, &mut Inline::default(), 2.0);
@@ -116,12 +127,7 @@ fn far_apart_piles_step_to_the_bit_as_if_alone() {
 /// the group's latest event rather than its own bodies'.)
 #[test]
 fn a_pour_ends_the_same_whatever_the_group_margin() {
-    let scene = format!(
-        "{OBJECTS}[[scatter]]\nobjects = [\"nut\", \"bolt\"]\ncount = 40\n\
-         min = [-0.15, -0.15, 0.05]\nmax = [0.15, 0.15, 0.6]\nseed = 3\nrandom_orientation = true\n\
-         [[bodies]]\nobject = \"bolt\"\nposition = [0.02, 0.0, 6.0]\n\
-         [[bodies]]\nobject = \"nut\"\nposition = [-0.05, 0.03, 9.0]\n"
-    );
+    let scene = pour_with_late_bodies();
     let run_with = |margin: f64| {
         let mut w = world(&scene);
         w.group_margin = margin;
@@ -162,12 +168,7 @@ fn a_pour_ends_the_same_whatever_the_group_margin() {
 /// proves nothing.
 #[test]
 fn a_pour_ends_the_same_with_its_groups_split() {
-    let scene = format!(
-        "{OBJECTS}[[scatter]]\nobjects = [\"nut\", \"bolt\"]\ncount = 40\n\
-         min = [-0.15, -0.15, 0.05]\nmax = [0.15, 0.15, 0.6]\nseed = 3\nrandom_orientation = true\n\
-         [[bodies]]\nobject = \"bolt\"\nposition = [0.02, 0.0, 6.0]\n\
-         [[bodies]]\nobject = \"nut\"\nposition = [-0.05, 0.03, 9.0]\n"
-    );
+    let scene = pour_with_late_bodies();
     let run_with = |split: bool| {
         let mut w = world(&scene);
         w.split_groups = split;

@@ -1105,23 +1105,41 @@ impl MpiExecutor<'_> {
             return prepared;
         }
         let ranks = workers + 1;
+        let jobs: Vec<(usize, usize, f64)> = (0..inputs.len())
+            .map(|g| {
+                let cuts = if inputs[g].pair_count() >= ranks * MIN_PREPARED_PAIRS {
+                    ranks
+                } else {
+                    1
+                };
+                (g, cuts, costs[g])
+            })
+            .collect();
+        self.prepare_in_ranges(st, params, workers, &inputs, &jobs)
+    }
+
+    /// The first stage of each group of `jobs` (index into `inputs`, the
+    /// number of ranges its pairs are cut into, its estimated seconds),
+    /// self-scheduled over rank 0 and `workers` workers (`PreparePairs`);
+    /// each group's answers joined, in the order of `jobs`.
+    fn prepare_in_ranges(
+        &mut self,
+        st: &StepStatic,
+        params: &GroupParams,
+        workers: usize,
+        inputs: &[GroupInput],
+        jobs: &[(usize, usize, f64)],
+    ) -> Vec<PreparedPairs> {
         let mut shares: Vec<(usize, (usize, usize))> = Vec::new();
         let mut share_costs = Vec::new();
-        for (g, input) in inputs.iter().enumerate() {
-            let n = input.pair_count();
-            let cuts = if n >= ranks * MIN_PREPARED_PAIRS {
-                ranks
-            } else {
-                1
-            };
-            if cuts > 1 {
-                self.dist.groups_prepared += 1;
-            }
+        for &(g, cuts, cost) in jobs {
+            let n = inputs[g].pair_count();
             for r in 0..cuts {
                 shares.push((g, (r * n / cuts, (r + 1) * n / cuts)));
-                share_costs.push(costs[g] / cuts as f64);
+                share_costs.push(cost / cuts as f64);
             }
         }
+        self.dist.groups_prepared += jobs.iter().filter(|&&(_, cuts, _)| cuts > 1).count() as u64;
         let (prepared, _, own) = self.self_schedule(
             workers,
             shares.clone(),
@@ -1142,11 +1160,13 @@ impl MpiExecutor<'_> {
         for &i in &own {
             self.book[0].tasks_np += prepared[i].tasks();
         }
-        let mut by_group: Vec<Vec<PreparedPairs>> = (0..inputs.len()).map(|_| Vec::new()).collect();
+        let mut by_group: BTreeMap<usize, Vec<PreparedPairs>> = BTreeMap::new();
         for ((g, _), p) in shares.into_iter().zip(prepared) {
-            by_group[g].push(p);
+            by_group.entry(g).or_default().push(p);
         }
-        by_group.into_iter().map(PreparedPairs::joined).collect()
+        jobs.iter()
+            .map(|&(g, _, _)| PreparedPairs::joined(by_group.remove(&g).unwrap_or_default()))
+            .collect()
     }
 
     /// A group predicted to take more than its ranks' fair share cannot be
@@ -1181,45 +1201,15 @@ impl MpiExecutor<'_> {
         if large.is_empty() {
             return (inputs, costs);
         }
-        // Ranges of each large group's pairs, one per rank, costed by the
-        // first stage's share of the group's predicted time.
-        let mut shares: Vec<(usize, (usize, usize))> = Vec::new();
-        let mut share_costs = Vec::new();
-        for &g in &large {
-            let n = inputs[g].pair_count();
-            for r in 0..ranks {
-                let range = (r * n / ranks, (r + 1) * n / ranks);
-                shares.push((g, range));
-                share_costs.push(costs[g] * FIRST_STAGE_SHARE / ranks as f64);
-            }
-        }
-        let (prepared, _, own) = self.self_schedule(
-            workers,
-            shares.clone(),
-            &share_costs,
-            |share| Req::PreparePairs {
-                params: params.clone(),
-                shares: share
-                    .into_iter()
-                    .map(|(g, range)| (inputs[g].clone(), range))
-                    .collect(),
-            },
-            |(g, range), _| prepare_pairs(st, &inputs[g], range),
-            |reply| match reply {
-                Reply::PreparePairs { prepared, busy_s } => Some((prepared, busy_s)),
-                _ => None,
-            },
-        );
-        for &i in &own {
-            self.book[0].tasks_np += prepared[i].tasks();
-        }
-        let mut by_group: BTreeMap<usize, Vec<PreparedPairs>> = BTreeMap::new();
-        for ((g, _), p) in shares.into_iter().zip(prepared) {
-            by_group.entry(g).or_default().push(p);
-        }
-        self.dist.groups_prepared += by_group.len() as u64;
-        for (g, parts) in by_group {
-            inputs[g].set_prepared(PreparedPairs::joined(parts));
+        // Each large group's pairs in a range per rank, costed by the first
+        // stage's share of the group's predicted time.
+        let jobs: Vec<(usize, usize, f64)> = large
+            .iter()
+            .map(|&g| (g, ranks, costs[g] * FIRST_STAGE_SHARE))
+            .collect();
+        let prepared = self.prepare_in_ranges(st, params, workers, &inputs, &jobs);
+        for (&g, p) in large.iter().zip(prepared) {
+            inputs[g].set_prepared(p);
             costs[g] *= 1.0 - FIRST_STAGE_SHARE;
         }
         (inputs, costs)

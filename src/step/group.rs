@@ -90,13 +90,17 @@ impl GroupPlan {
     }
 }
 
+/// Whether body `i` is a node of the groups: a dynamic body still in the
+/// world (fixed and driven bodies take no impulse and connect nothing).
+fn grouped(world: &Region, i: u32) -> bool {
+    let b = &world.bodies[i as usize];
+    b.is_dynamic() && b.activity != Activity::Fallen
+}
+
 /// Partitions the world's candidate pairs into groups, ordered by id.
 pub(crate) fn plan_groups(world: &Region, start: &StepStart) -> Vec<GroupPlan> {
     let n = world.bodies.len();
-    let dynamic = |i: u32| {
-        let b = &world.bodies[i as usize];
-        b.is_dynamic() && b.activity != Activity::Fallen
-    };
+    let dynamic = |i: u32| grouped(world, i);
     let mut sets = DisjointSets::new(n);
     for &(a, b) in start.pairs.iter().chain(&start.touching) {
         if dynamic(a) && dynamic(b) {
@@ -775,10 +779,7 @@ fn split_group(
     family: &Family,
 ) -> Vec<GroupPlan> {
     let n = world.bodies.len();
-    let dynamic = |i: u32| {
-        let b = &world.bodies[i as usize];
-        b.is_dynamic() && b.activity != Activity::Fallen
-    };
+    let dynamic = |i: u32| grouped(world, i);
     let mut sets = DisjointSets::new(n);
     for bodies in &start.together {
         for w in bodies.windows(2) {
@@ -847,10 +848,7 @@ fn split_group(
 /// bodies among them, or its one dynamic body.
 fn family_pairs(world: &Region, start: &StepStart, family: &Family, members: &[u32]) -> Vec<usize> {
     let inside = |x: u32| members.binary_search(&x).is_ok();
-    let dynamic = |x: u32| {
-        let b = &world.bodies[x as usize];
-        b.is_dynamic() && b.activity != Activity::Fallen
-    };
+    let dynamic = |i: u32| grouped(world, i);
     family
         .first
         .keys()
@@ -887,10 +885,7 @@ fn check_parts(
     }
     let h = st.settings.dt;
     let left = |i: u32| paths[i as usize].is_some();
-    let dynamic = |x: u32| {
-        let b = &world.bodies[x as usize];
-        b.is_dynamic() && b.activity != Activity::Fallen
-    };
+    let dynamic = |i: u32| grouped(world, i);
     // Pairs between parts along the predicted paths: the first stage's
     // answer stands where neither body left its prediction.
     for (&k, (r, _)) in &family.first {
