@@ -80,11 +80,16 @@ struct RunArgs {
     /// Never put resting systems to sleep (costs time; for measurements).
     #[arg(long)]
     no_sleep: bool,
-    /// Split large interaction groups into the parts that meet within a
-    /// step, checked against each other and merged where their paths meet:
-    /// smaller units for many ranks, more work on one (docs/architecture.md).
-    #[arg(long)]
+    /// Split every large interaction group into the parts that meet within
+    /// a step, checked against each other and merged where their paths
+    /// meet, on any number of ranks (by default only on several ranks, a
+    /// group that would hold up the others; docs/architecture.md).
+    #[arg(long, conflicts_with = "whole_groups")]
     split_groups: bool,
+    /// Never split an interaction group, not even one that holds up the
+    /// other ranks (for measurements; the results are the same).
+    #[arg(long)]
+    whole_groups: bool,
     /// Test aid: make rank R take F times longer per task, e.g. --slow-rank 2=3.0.
     #[arg(long, value_parser = parse_slow)]
     slow_rank: Vec<(i32, f64)>,
@@ -306,6 +311,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
     } else {
         mpi_exec = MpiExecutor::new(&world, roles.clone(), &scene.objects);
         mpi_exec.force_distribute = cli.force_distribute;
+        mpi_exec.split_where_it_pays = !cli.whole_groups;
         mpi_exec.set_hosts(hosts.clone());
         link_rates = mpi_exec.link_rates();
         &mut mpi_exec

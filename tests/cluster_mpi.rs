@@ -367,7 +367,10 @@ fn state_hash_and_trajectory_are_identical_on_1_2_3_and_5_ranks() {
 /// Large groups split into the parts that interact within each step
 /// (`--split-groups`) give the one-rank result on 3 ranks, with the
 /// split groups' first stage scattered in ranges and the parts stepped on
-/// the workers, and the same result as the groups stepped whole.
+/// the workers, and the same result as the groups stepped whole; so do two
+/// ranks that split the groups that would hold the other up where that
+/// measures faster (the default; the first such step always does) and two
+/// ranks with `--whole-groups`.
 #[test]
 fn split_groups_give_the_same_result_on_1_and_3_ranks() {
     let _one = one_at_a_time();
@@ -398,6 +401,22 @@ fn split_groups_give_the_same_result_on_1_and_3_ranks() {
         other.what
     );
     assert_same_result(&reference, &other);
+    // By default two ranks split the groups that would hold the other up
+    // (the pile's, most steps), and the answer stays the one-rank answer.
+    let auto = run(root.path(), "np2-auto", Ranks::Np(2), &nuts, &args);
+    assert!(
+        auto.count(&["distributed", "steps_split"]) > 0,
+        "no group was split on two ranks"
+    );
+    assert_same_result(&whole, &auto);
+    let kept = [&args[..], &["--whole-groups"]].concat();
+    let kept = run(root.path(), "np2-whole", Ranks::Np(2), &nuts, &kept);
+    assert_eq!(
+        kept.count(&["distributed", "steps_split"]),
+        0,
+        "--whole-groups split a group"
+    );
+    assert_same_result(&whole, &kept);
 }
 
 #[test]

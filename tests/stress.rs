@@ -19,7 +19,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use rigidsim::body::Activity;
 use rigidsim::collision::narrowphase::CONTACT_TOLERANCE;
-use rigidsim::step::{Inline, MIN_EVENTS_PER_STEP, World};
+use rigidsim::step::{EVENTS_PER_BODY, Inline, World};
 use std::fmt::Write as _;
 
 const G: f64 = 9.81;
@@ -1513,14 +1513,15 @@ fn seed_three_scene_169_stays_within_the_tolerance() {
 /// at rounding level, while the pair sinks into the wall 2.5 ms later in the
 /// step. Each impact was bisected on V-Clip's "apart", whose verdict flips
 /// at rounding level there: impacts 0.15 µs apart until the step's 256
-/// events ran out and the overlap was accepted (34c71c7). A pair touching
-/// at the bisection's start is bisected on its contact points' depth.
+/// events (then the group's, since each body's) ran out and the overlap
+/// was accepted (34c71c7). A pair touching at the bisection's start is
+/// bisected on its contact points' depth.
 #[test]
 fn body_touching_a_wall_does_not_exhaust_the_event_budget() {
     let (w, _, _) = replay("stress_touching_wall_event_budget");
     assert_eq!(w.counters.overlaps_accepted, 0, "overlaps accepted");
     assert!(
-        w.counters.max_events_in_step < MIN_EVENTS_PER_STEP as u64 / 4,
+        w.counters.max_events_in_step < EVENTS_PER_BODY as u64 / 4,
         "{} events in one step",
         w.counters.max_events_in_step
     );

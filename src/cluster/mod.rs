@@ -18,8 +18,8 @@ use crate::run::{Frame, FrameRenderer, FrameSink};
 use crate::scene::Scene;
 use crate::step::stats::StageClock;
 use crate::step::{
-    Executor, GroupInput, GroupParams, GroupReply, Inline, PreparedPairs, StepStatic,
-    prepare_pairs, run_group,
+    Executor, GroupInput, GroupParams, GroupReply, Inline, PreparedPairs, SPLIT_AUTO_MIN_MEMBERS,
+    SPLIT_MIN_MEMBERS, StepStatic, prepare_pairs, run_group,
 };
 use mpi::point_to_point::{Destination, Source};
 use mpi::request::{Request, StaticScope};
@@ -335,10 +335,18 @@ pub struct MpiExecutor<'w> {
     parts: Vec<usize>,
     /// Distribute regardless of cost (tests of determinism and balance).
     pub force_distribute: bool,
+    /// Split the groups that would hold up the other ranks
+    /// (`Executor::split_groups`; on unless `--whole-groups`).
+    pub split_where_it_pays: bool,
     net: Network,
     /// Where the group steps and the island solves went and what they
     /// took (`StageChoice`).
     group_choice: schedule::StageChoice,
+    /// Whether splitting the groups that would hold the others up pays,
+    /// measured as for `group_choice` ("out" is split), and this step's
+    /// choice, predicted cost and start (`Executor::groups_stepped`).
+    split_choice: schedule::StageChoice,
+    split_step: Option<(bool, f64, Instant)>,
     solve_choice: schedule::StageChoice,
 }
 
@@ -357,8 +365,11 @@ impl<'w> MpiExecutor<'w> {
             polygons: objects.iter().map(|o| o.polygon_count).collect(),
             parts: objects.iter().map(|o| o.parts.len()).collect(),
             force_distribute: false,
+            split_where_it_pays: true,
             net: Network::default(),
             group_choice: schedule::StageChoice::default(),
+            split_choice: schedule::StageChoice::default(),
+            split_step: None,
             solve_choice: schedule::StageChoice::default(),
             roles,
         };
@@ -866,6 +877,71 @@ impl Executor for MpiExecutor<'_> {
         self.learn_traffic(Stage::StepGroups, mark);
         self.dist.distributable_s += self.clock.leave();
         r
+    }
+
+    fn split_groups(&mut self, groups: &[(f64, usize)]) -> Vec<bool> {
+        let predicted_s: Vec<f64> = groups.iter().map(|&(c, _)| c).collect();
+        let fair = self.fair_group_share(&predicted_s);
+        // `--force-distribute` (a test aid) takes every group that may be
+        // split at all, so that small scenes take this path too.
+        let fewest = if self.force_distribute {
+            SPLIT_MIN_MEMBERS
+        } else {
+            SPLIT_AUTO_MIN_MEMBERS
+        };
+        let above: Vec<bool> = groups
+            .iter()
+            .map(|&(c, members)| c > fair && members >= fewest)
+            .collect();
+        if !above.contains(&true) {
+            return above;
+        }
+        // Whether it pays is measured: on a settled pile the split groups'
+        // steps share out, while bodies pour in their parts meet so often
+        // that the runs lost cost more than the sharing gains.
+        let split = self.split_choice.goes_out();
+        self.split_step = Some((split, predicted_s.iter().sum(), Instant::now()));
+        if split {
+            self.dist.steps_split += 1;
+            above
+        } else {
+            self.dist.steps_kept_whole += 1;
+            vec![false; above.len()]
+        }
+    }
+
+    fn groups_stepped(&mut self) {
+        if let Some((split, cost, started)) = self.split_step.take() {
+            self.split_choice
+                .record(split, cost, started.elapsed().as_secs_f64());
+        }
+    }
+}
+
+impl MpiExecutor<'_> {
+    /// Each rank's fair share of the step's group work (`predicted_s`,
+    /// seconds per group) where the group steps would go out now
+    /// (`step_groups_stage`'s choice), infinite where they stay on rank 0
+    /// or `split_where_it_pays` is off: a group predicted above it would
+    /// hold the other ranks up, and is split (`Executor::split_groups`).
+    fn fair_group_share(&self, predicted_s: &[f64]) -> f64 {
+        let total: f64 = predicted_s.iter().sum();
+        let modelled = self.workers_for_stage(
+            Stage::StepGroups,
+            total,
+            predicted_s.len(),
+            SELF_SCHEDULED_SHARE,
+        );
+        let workers = self.group_choice.workers(
+            modelled,
+            self.workers_without_link(total),
+            predicted_s.len(),
+        );
+        if workers == 0 || !self.split_where_it_pays {
+            f64::INFINITY
+        } else {
+            total / (1 + workers) as f64
+        }
     }
 }
 

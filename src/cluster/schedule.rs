@@ -285,6 +285,12 @@ impl StageChoice {
         }
     }
 
+    /// Whether the other way (out) goes now by the measures alone: it
+    /// measured faster by `DISTRIBUTE_MARGIN`, or a probe of it is due.
+    pub fn goes_out(&self) -> bool {
+        self.workers(0, 1, 2) > 0
+    }
+
     /// Records a step's stage: whether it went out, its predicted cost and
     /// the wall seconds it took.
     pub fn record(&mut self, distributed: bool, cost: f64, wall_s: f64) {

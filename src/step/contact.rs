@@ -49,12 +49,19 @@ impl SpinResolves {
         self.0.retain(|&(_, j)| j != i);
     }
 
-    /// The earliest due, if any: (time, body).
-    pub fn next(&self) -> Option<(f64, usize)> {
+    /// The earliest due, if any: (time, body), each no earlier than
+    /// `not_before` of its body.
+    pub fn next(&self, not_before: impl Fn(usize) -> f64) -> Option<(f64, usize)> {
         self.0
             .iter()
-            .copied()
+            .map(|&(at, i)| (at.max(not_before(i)), i))
             .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+    }
+
+    /// Puts body `i`'s re-solve back, due at `at`.
+    pub fn defer(&mut self, i: usize, at: f64) {
+        self.take(i);
+        self.0.push((at, i));
     }
 }
 
@@ -266,7 +273,7 @@ impl Region<'_> {
 
         let clock = Instant::now();
         crate::output::capture::islands(&tasks);
-        let results = if self.st.split_groups {
+        let results = if self.keep_answers {
             solve_again_or_anew(exec, tasks)
         } else {
             exec.solve_islands(tasks)
@@ -339,7 +346,7 @@ const KEPT_MIN_CONTACTS: usize = 16;
 /// Bytes of kept tasks and answers on one thread before all are dropped.
 const KEPT_MAX_BYTES: usize = 64 << 20;
 
-/// The island solves of a split group's parts (`World::split_groups`): a
+/// The island solves of a split group's parts (`Region::keep_answers`): a
 /// merged part stepped again from the step's start takes its parts' events
 /// before they met once more, solving the very islands they solved. Each
 /// answer is kept by its task's bytes on the thread that solved it and

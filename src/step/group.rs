@@ -196,6 +196,15 @@ pub(crate) struct StartIndex {
     pub warm: PairIndex,
 }
 
+/// Seconds a group's step is expected to take: what its bodies' groups
+/// took last step, a body never grouped before a pair test's worth (10 µs).
+fn predicted_s(start: &StepStart, plan: &GroupPlan) -> f64 {
+    plan.members
+        .iter()
+        .map(|&i| start.body_cost[i as usize].max(1e-5))
+        .sum()
+}
+
 /// The group's input, cut from the world at the start of the impact stage.
 pub(crate) fn group_input(
     world: &Region,
@@ -256,12 +265,7 @@ pub(crate) fn group_input(
         .iter()
         .filter_map(|&(t, i)| ids.binary_search(&(i as u32)).ok().map(|l| (t, l)))
         .collect();
-    // A body never grouped before counts as a pair test's worth (10 µs).
-    let predicted_s = plan
-        .members
-        .iter()
-        .map(|&i| start.body_cost[i as usize].max(1e-5))
-        .sum();
+    let predicted_s = predicted_s(start, plan);
     GroupInput {
         predicted_s,
         prepared: None,
@@ -369,6 +373,7 @@ pub fn prepare_pairs(
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
         integrated: Default::default(),
+        keep_answers: false,
     };
     let separating: PairMap<Vector3<f64>> = input.separating.iter().cloned().collect();
     let since: SolvedSince = input.since.iter().cloned().collect();
@@ -637,6 +642,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
         integrated: Default::default(),
+        keep_answers: keep_paths,
     };
     let state = GroupState {
         seg,
@@ -713,6 +719,13 @@ fn find_leaks(
 /// number 320-400, the largest 21-77 bodies. Below this a group is cheap
 /// enough whole.
 pub const SPLIT_MIN_MEMBERS: usize = 16;
+/// The fewest bodies of a group that the executor splits of its own
+/// accord (`Executor::split_groups`): a pile. Smaller groups that hold the
+/// others up are mostly bodies pouring in, whose parts meet so often that
+/// the runs lost cost more than the sharing gains (the 200-body pour on two
+/// ranks: 1.77 s split against 1.59 s whole, medians of 5, its largest
+/// group 159 bodies).
+pub const SPLIT_AUTO_MIN_MEMBERS: usize = 256;
 
 /// Gap (m) at the step's end within which a pair one of whose bodies has a
 /// predicted impact stays in one part: the impact sends its bodies off
@@ -966,6 +979,7 @@ fn paths_meet(
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
         integrated: Default::default(),
+        keep_answers: false,
     };
     let since: SolvedSince = start
         .since
@@ -1044,8 +1058,14 @@ pub(crate) fn step_groups<'s>(
     };
     // The large groups' first stage, through the executor, then their parts.
     let whole = plan_groups(world, start);
+    let chosen = exec.split_groups(
+        &whole
+            .iter()
+            .map(|p| (predicted_s(start, p), p.members.len()))
+            .collect::<Vec<_>>(),
+    );
     let large: Vec<usize> = (0..whole.len())
-        .filter(|&p| st.split_groups && whole[p].members.len() >= SPLIT_MIN_MEMBERS)
+        .filter(|&p| whole[p].members.len() >= SPLIT_MIN_MEMBERS && (st.split_groups || chosen[p]))
         .collect();
     let inputs = large
         .iter()
@@ -1271,6 +1291,7 @@ pub(crate) fn step_groups<'s>(
         .into_iter()
         .map(|r| r.expect("every group ran"))
         .collect();
+    exec.groups_stepped();
     Ok(done)
 }
 

@@ -7,7 +7,7 @@ use super::group::{GroupOutput, GroupState, PreparedPairs};
 use super::region::{PairKey, PairMap, Region, Segment};
 use super::stats::NumericalFailure;
 use super::toi::{Since, SolvedSince};
-use super::{EVENTS_PER_MOVING_BODY, Executor, MAX_EARLIER_IMPACTS, MIN_EVENTS_PER_STEP};
+use super::{EVENTS_PER_BODY, Executor, MAX_EARLIER_IMPACTS};
 use crate::body::{Activity, BodyState};
 use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
@@ -185,24 +185,6 @@ impl PairBook {
         self.queue.first().map(|&(t, k)| (k, t.0))
     }
 
-    /// The latest segment start of the bodies connected to body `i` by
-    /// candidate pairs (itself included).
-    fn latest_start(&self, seg: &[Segment], i: usize) -> f64 {
-        let mut seen = vec![false; self.partners.len()];
-        seen[i] = true;
-        let mut frontier = vec![i as u32];
-        let mut latest = seg[i].time;
-        while let Some(j) = frontier.pop() {
-            for &k in &self.partners[j as usize] {
-                if !std::mem::replace(&mut seen[k as usize], true) {
-                    latest = latest.max(seg[k as usize].time);
-                    frontier.push(k);
-                }
-            }
-        }
-        latest
-    }
-
     /// Times of impact already found for `keys` (the group's first stage,
     /// prepared beforehand): as `earliest` would have found them, no pair
     /// being accepted yet.
@@ -265,9 +247,6 @@ pub(crate) fn step_group(
     let keys = prepared_toi.as_ref().map(|_| pairs.clone());
     let clock = Instant::now();
     let nested_before = g.stage.nested();
-    let moving = (0..n)
-        .filter(|&i| g.moving(i) && g.bodies[i].is_dynamic())
-        .count();
     let mut book = PairBook::new(&g, &seg, &end, pairs, results);
     if let (Some(keys), Some(toi)) = (keys, prepared_toi) {
         book.known(&keys, toi);
@@ -314,31 +293,46 @@ pub(crate) fn step_group(
     let mut pieces: Vec<SphereProxy> = Vec::new();
     let mut events = 0usize;
     let mut accepted: BTreeSet<PairKey> = BTreeSet::new();
-    let mut last_event: Option<(PairKey, f64)> = None;
-    let budget = MIN_EVENTS_PER_STEP.max(EVENTS_PER_MOVING_BODY * moving);
+    // Every rule of the loop is a body's own, so that a group split into
+    // parts (`group::split_group`) decides each as the whole group would:
+    // the events each body took part in (`EVENTS_PER_BODY`), and the last
+    // event that moved it, by world ids (the no-progress rule).
+    let mut events_of = vec![0usize; n];
+    let mut last_of: Vec<Option<(PairKey, f64)>> = vec![None; n];
+    let dynamic = |g: &Region, (a, b): PairKey| {
+        [a as usize, b as usize]
+            .into_iter()
+            .filter(|&i| g.bodies[i].is_dynamic())
+            .collect::<Vec<_>>()
+    };
     loop {
         let violation = book.earliest(&mut g, &seg, h, &since, &accepted);
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
-        // rolls back and is solved as at an impact. Not before the latest
-        // event of the bodies its pairs reach, where their segments start
-        // (only those: what else the group holds must not move it).
-        // (The latest start only delays it: one due no earlier than the
-        // impact needs no search of the bodies its pairs reach.)
+        // rolls back and is solved as at an impact. Not before the
+        // segments of the bodies it rolls back start (their latest
+        // events): first those solved with the spinner, then, once its
+        // group is found, all of the group's.
         let before_impact = |at: f64| violation.is_none_or(|(_, t)| at < t);
         let due = spin_resolves
-            .next()
-            .filter(|&(at, _)| before_impact(at))
-            .map(|(at, i)| (at.max(book.latest_start(&seg, i)), i))
+            .next(|i| {
+                solved_together
+                    .partners(i)
+                    .iter()
+                    .fold(seg[i].time, |t, &j| t.max(seg[j].time))
+            })
             .filter(|&(at, _)| before_impact(at));
         let spin_resolve = due.is_some();
         let Some((mut pair, mut tau)) = due.map(|(at, i)| ((i as u32, i as u32), at)).or(violation)
         else {
             break;
         };
+        let exhausted = dynamic(&g, pair)
+            .iter()
+            .any(|&i| events_of[i] >= EVENTS_PER_BODY);
         if spin_resolve {
             spin_resolves.take(pair.0 as usize);
-        } else if events >= budget {
+        } else if exhausted {
             // Out of events: keep the small overlap rather than stall the step.
             accepted.insert(pair);
             book.accept(pair);
@@ -347,6 +341,15 @@ pub(crate) fn step_group(
         }
         let (mut group_states, mut group_pairs, mut at_tau) =
             g.impact_group(exec, pair, tau, &book.partners, &seg, &solved_together);
+        if spin_resolve {
+            let latest = group_states
+                .iter()
+                .fold(tau, |t, &(i, _)| t.max(seg[i].time));
+            if latest > tau {
+                spin_resolves.defer(pair.0 as usize, latest);
+                continue;
+            }
+        }
         // An overlap beyond what a pair carried, found at τ in another
         // pair of the group, began before τ unseen: the end-of-step test
         // misses a body that dips into another and is out again by the
@@ -363,18 +366,22 @@ pub(crate) fn step_group(
             (group_states, group_pairs, at_tau) =
                 g.impact_group(exec, pair, tau, &book.partners, &seg, &solved_together);
         }
-        if last_event == Some((pair, tau)) {
+        let world_event = ((g.ids[pair.0 as usize], g.ids[pair.1 as usize]), tau);
+        let own = dynamic(&g, pair);
+        if !own.is_empty() && own.iter().all(|&i| last_of[i] == Some(world_event)) {
             // No progress: keep the small overlap rather than stall the step.
             accepted.insert(pair);
             book.accept(pair);
             g.counters.overlaps_accepted += 1;
             continue;
         }
-        last_event = Some((pair, tau));
         if spin_resolve && pair.0 == pair.1 {
             g.counters.spin_resolves += 1;
         } else {
             events += 1;
+            for &i in &own {
+                events_of[i] += 1;
+            }
         }
         let rolled: Vec<usize> = group_states.iter().map(|&(i, _)| i).collect();
         // Roll the bodies back to τ; a path that had already left its
@@ -401,8 +408,9 @@ pub(crate) fn step_group(
         members.extend(woken);
         members.sort_unstable();
         members.dedup();
-        for &i in &members {
+        for &i in members.iter().chain(&own) {
             left[i] = true;
+            last_of[i] = Some(world_event);
         }
         let solved = g.contact_phase(exec, &touching_now, &members, &mut seg, h - tau);
         solved_together.record(&solved);

@@ -38,7 +38,7 @@ pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
 pub(crate) use contact::{Touching, WarmContact};
 pub use group::{
     GROUP_MARGIN, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PreparedPairs,
-    SPLIT_MIN_MEMBERS, prepare_pairs, run_group,
+    SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group,
 };
 pub use region::StepStatic;
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
@@ -76,6 +76,19 @@ pub trait Executor {
         params: &GroupParams,
         inputs: Vec<GroupInput>,
     ) -> Vec<PreparedPairs>;
+    /// Which of the step's groups (their predicted seconds and bodies, in
+    /// group order) to split into the parts that meet within the step
+    /// (`group::split_group`): piles (`group::SPLIT_AUTO_MIN_MEMBERS`) that
+    /// would hold up the ranks sharing the group steps, where splitting
+    /// measures faster. The choice changes the time, not the answer: a
+    /// split group ends as it would whole (`docs/architecture.md`). One
+    /// rank splits none (unless `World::split_groups` asks for all).
+    fn split_groups(&mut self, groups: &[(f64, usize)]) -> Vec<bool> {
+        vec![false; groups.len()]
+    }
+    /// The step's groups are all stepped (after `split_groups`), so what
+    /// its choice cost can be measured.
+    fn groups_stepped(&mut self) {}
     /// Ends the run on every rank; returns the per-rank accounts and how often
     /// each stage was distributed.
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution);
@@ -163,14 +176,17 @@ impl Executor for Inline {
     }
 }
 
-/// Impact events a step may take before it accepts the overlaps left: at
-/// least `MIN_EVENTS_PER_STEP`, and `EVENTS_PER_MOVING_BODY` for each moving
-/// body. An event re-solves one contact island, so its cost does not grow
-/// with the scene, while the number of impacts in a step does: 1000 nuts
-/// and bolts landing take up to 733 events in a step, and the old fixed
-/// budget of 256 left 4644 overlaps up to 4.6 cm deep in the first 0.6 s.
-pub const MIN_EVENTS_PER_STEP: usize = 256;
-pub const EVENTS_PER_MOVING_BODY: usize = 4;
+/// Impact events one body may take part in during a step (as one of an
+/// impact's two bodies) before the overlaps left on its pairs are accepted.
+/// The count is each body's own, not its group's, so what a group decides
+/// depends only on the bodies its events touch, and a group split into
+/// parts decides as it would whole. 256 is what a group of up to 64
+/// moving bodies had to share before: a body chattering against a wall or
+/// between two neighbours still stops there, while 1000 nuts and bolts
+/// landing (up to 733 events in a step, one or two a body) are far from
+/// it; a shared budget of 256 left 4644 overlaps up to 4.6 cm deep in
+/// their first 0.6 s.
+pub const EVENTS_PER_BODY: usize = 256;
 /// How many times an impact may give way to an earlier one found in its
 /// group (`Region::earlier_impact`) before it is taken as it is.
 pub(crate) const MAX_EARLIER_IMPACTS: usize = 8;
@@ -325,6 +341,7 @@ impl World {
             impacts: take(&mut self.impacts),
             pair_forces: BTreeMap::new(),
             integrated: Default::default(),
+            keep_answers: false,
         };
         let first = self.steps == 0;
         let fallen_before = world.counters.bodies_fallen;

@@ -150,6 +150,11 @@ pub struct Distribution {
     /// ranges of their pairs before they stepped (`PreparePairs`), and
     /// groups to be split whose first stage did (`--split-groups`).
     pub groups_prepared: u64,
+    /// Steps with a group that would hold the other ranks up
+    /// (`Executor::split_groups`): those that split it, as the measured
+    /// times chose (or a probe), and those that stepped it whole.
+    pub steps_split: u64,
+    pub steps_kept_whole: u64,
     pub message_latency_s: f64,
     /// Wall seconds rank 0 spent inside the stages that go to other ranks
     /// when there are some (pair tasks, island solves, group steps; the
@@ -163,8 +168,8 @@ pub struct Distribution {
     /// Seconds the group steps took, each counted where it ran.
     pub group_s: f64,
     /// Of those, the share in each step's largest group (summed over the
-    /// steps): groups do not split, so no number of ranks takes the group
-    /// stage below this share of its one-rank time.
+    /// steps; a split group's parts count apart): no number of ranks takes
+    /// the group stage below this share of its one-rank time.
     pub largest_group_share: f64,
 }
 
