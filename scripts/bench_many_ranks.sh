@@ -71,7 +71,9 @@ for r in $RANKS; do
     echo "bench_many_ranks: $r ranks left out ($cores cores here)"; fi
 done
 
-# Each run whole, and with SPLIT=1 also split (`--split-groups`).
+# Each run as by default (on several ranks a pile is split where that
+# measures faster), and with SPLIT=1 also with every group split
+# (`--split-groups`).
 variants=("")
 if [ "${SPLIT:-0}" = 1 ]; then variants+=("-split"); fi
 source scripts/crowd.sh
