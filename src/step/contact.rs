@@ -5,6 +5,7 @@
 //! needs of each solve (who was solved together, who spins).
 
 use super::Executor;
+use super::kept::{self, Kept};
 use super::region::{Region, Segment, pose};
 use crate::body::BodyId;
 use crate::collision::manifold::ContactPoint;
@@ -343,65 +344,26 @@ impl Region<'_> {
 /// Islands of this many contacts or more are kept by `solve_again_or_anew`
 /// (below, a solve costs about what its bytes cost to hash).
 const KEPT_MIN_CONTACTS: usize = 16;
-/// Bytes of kept tasks and answers on one thread before all are dropped.
-const KEPT_MAX_BYTES: usize = 64 << 20;
 
-/// The island solves of a split group's parts (`Region::keep_answers`): a
-/// merged part stepped again from the step's start takes its parts' events
-/// before they met once more, solving the very islands they solved. Each
-/// answer is kept by its task's bytes on the thread that solved it and
-/// given again for the same bytes: `solve_island` is a function of its
-/// task alone, so only the time changes (a task solved on another rank is
-/// solved again).
+/// The island solves of a split group's parts (`Region::keep_answers`,
+/// `super::kept`): `solve_island` is a function of its task alone.
 fn solve_again_or_anew(
     exec: &mut dyn Executor,
     tasks: Vec<IslandTask>,
 ) -> Vec<crate::contact::solver::IslandResult> {
     use crate::contact::solver::IslandResult;
-    type Kept = (
-        std::collections::HashMap<Vec<u8>, IslandResult, rustc_hash::FxBuildHasher>,
-        usize,
-    );
     thread_local! {
-        static KEPT: std::cell::RefCell<Kept> = Default::default();
+        static KEPT: std::cell::RefCell<Kept<IslandResult>> = Default::default();
     }
-    let keys: Vec<Option<Vec<u8>>> = tasks
+    let questions = tasks
         .iter()
-        .map(|t| {
-            (t.contacts.len() >= KEPT_MIN_CONTACTS).then(|| {
-                bincode::serde::encode_to_vec(t, bincode::config::standard())
-                    .expect("an island task encodes")
-            })
-        })
+        .map(|t| (t.contacts.len() >= KEPT_MIN_CONTACTS).then(|| kept::question(t)))
         .collect();
-    let mut results: Vec<Option<IslandResult>> = KEPT.with(|kept| {
-        let kept = kept.borrow();
-        keys.iter()
-            .map(|k| k.as_ref().and_then(|k| kept.0.get(k).cloned()))
-            .collect()
-    });
-    let missing: Vec<usize> = (0..tasks.len()).filter(|&i| results[i].is_none()).collect();
-    if missing.is_empty() {
-        return results.into_iter().map(Option::unwrap).collect();
-    }
-    let mut tasks: Vec<Option<IslandTask>> = tasks.into_iter().map(Some).collect();
-    let solved = exec.solve_islands(missing.iter().map(|&i| tasks[i].take().unwrap()).collect());
-    KEPT.with(|kept| {
-        let mut kept = kept.borrow_mut();
-        for (&i, r) in missing.iter().zip(&solved) {
-            if let Some(k) = &keys[i] {
-                let bytes = k.len() + 64 * (r.impulse.len() + r.contact_force.len());
-                if kept.1 + bytes > KEPT_MAX_BYTES {
-                    kept.0.clear();
-                    kept.1 = 0;
-                }
-                kept.1 += bytes;
-                kept.0.insert(k.clone(), r.clone());
-            }
-        }
-    });
-    for (i, r) in missing.into_iter().zip(solved) {
-        results[i] = Some(r);
-    }
-    results.into_iter().map(Option::unwrap).collect()
+    kept::again_or_anew(
+        &KEPT,
+        tasks,
+        questions,
+        |tasks| exec.solve_islands(tasks),
+        |r| 64 * (r.impulse.len() + r.contact_force.len()),
+    )
 }

@@ -29,6 +29,7 @@ mod contact;
 mod frame;
 mod group;
 mod impacts;
+mod kept;
 mod region;
 mod sleep;
 pub mod stats;

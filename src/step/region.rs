@@ -9,6 +9,7 @@
 
 use super::Executor;
 use super::contact::{Touching, WarmContact};
+use super::kept::{self, Kept};
 use super::stats::{Counters, StageSeconds};
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::broadphase::{self, SphereProxy};
@@ -365,7 +366,24 @@ impl<'s> Region<'s> {
     ) -> Vec<PairResult> {
         let clock = Instant::now();
         self.counters.pair_tests += tasks.len() as u64;
-        let results = exec.narrowphase(self.st.objects, tasks);
+        let results = if self.keep_answers {
+            // A part of a split group (`super::kept`): a pair test is a
+            // function of its task.
+            thread_local! {
+                static KEPT: std::cell::RefCell<Kept<PairResult>> = Default::default();
+            }
+            let questions = tasks.iter().map(|t| Some(kept::question(t))).collect();
+            let objects = self.st.objects;
+            kept::again_or_anew(
+                &KEPT,
+                tasks,
+                questions,
+                |tasks| exec.narrowphase(objects, tasks),
+                |r| 64 * (4 + r.contacts.len() + r.features.len()),
+            )
+        } else {
+            exec.narrowphase(self.st.objects, tasks)
+        };
         for r in &results {
             self.counters.vclip_iterations += r.iterations as u64;
         }

@@ -6,6 +6,7 @@
 
 use super::Executor;
 use super::contact::SolvedTogether;
+use super::kept::{self, Kept};
 use super::region::{PairKey, PairMap, Region, Segment, pose};
 use crate::body::{BodyKind, BodyState, ObjectDef};
 use crate::collision::manifold::NormalTurn;
@@ -94,6 +95,44 @@ impl Region<'_> {
     /// overlaps (or a fast pair crossed) beyond what it carried: the same
     /// search as `time_of_impact`, on a stretch of the step.
     pub(crate) fn time_of_impact_within(
+        &mut self,
+        k: PairKey,
+        r: &PairResult,
+        seg: &[Segment],
+        (start, h): (f64, f64),
+        since: &SolvedSince,
+    ) -> Option<f64> {
+        if !self.keep_answers {
+            return self.time_of_impact_searched(k, r, seg, (start, h), since);
+        }
+        // A part of a split group (`super::kept`): the search reads the
+        // step's start, the two bodies and their segments, the interval,
+        // when the pair was last solved, its end result and its features.
+        thread_local! {
+            static KEPT: std::cell::RefCell<Kept<Option<f64>>> = Default::default();
+        }
+        let (a, b) = (k.0 as usize, k.1 as usize);
+        let question = kept::question(&(
+            self.st.t0,
+            (self.ids[a], self.ids[b]),
+            (&self.bodies[a], &self.bodies[b]),
+            (&seg[a], &seg[b]),
+            (start, h),
+            since.get(&k),
+            r,
+            self.features.get(&k),
+        ));
+        kept::again_or_anew(
+            &KEPT,
+            vec![()],
+            vec![Some(question)],
+            |_| vec![self.time_of_impact_searched(k, r, seg, (start, h), since)],
+            |_| 16,
+        )[0]
+    }
+
+    /// `time_of_impact_within`, searched.
+    fn time_of_impact_searched(
         &mut self,
         k: PairKey,
         r: &PairResult,
