@@ -880,8 +880,19 @@ impl Executor for MpiExecutor<'_> {
     }
 
     fn split_groups(&mut self, groups: &[(f64, usize)]) -> Vec<bool> {
-        let predicted_s: Vec<f64> = groups.iter().map(|&(c, _)| c).collect();
-        let fair = self.fair_group_share(&predicted_s);
+        let none = vec![false; groups.len()];
+        if !self.split_where_it_pays {
+            return none;
+        }
+        // A group predicted above each rank's fair share of the step's
+        // group work, where the group steps would go out now, would hold
+        // the other ranks up.
+        let total: f64 = groups.iter().map(|&(c, _)| c).sum();
+        let (_, workers) = self.group_workers(total, groups.len());
+        if workers == 0 {
+            return none;
+        }
+        let fair = total / (1 + workers) as f64;
         // `--force-distribute` (a test aid) takes every group that may be
         // split at all, so that small scenes take this path too.
         let fewest = if self.force_distribute {
@@ -900,13 +911,13 @@ impl Executor for MpiExecutor<'_> {
         // steps share out, while bodies pour in their parts meet so often
         // that the runs lost cost more than the sharing gains.
         let split = self.split_choice.goes_out();
-        self.split_step = Some((split, predicted_s.iter().sum(), Instant::now()));
+        self.split_step = Some((split, total, Instant::now()));
         if split {
             self.dist.steps_split += 1;
             above
         } else {
             self.dist.steps_kept_whole += 1;
-            vec![false; above.len()]
+            none
         }
     }
 
@@ -919,29 +930,17 @@ impl Executor for MpiExecutor<'_> {
 }
 
 impl MpiExecutor<'_> {
-    /// Each rank's fair share of the step's group work (`predicted_s`,
-    /// seconds per group) where the group steps would go out now
-    /// (`step_groups_stage`'s choice), infinite where they stay on rank 0
-    /// or `split_where_it_pays` is off: a group predicted above it would
-    /// hold the other ranks up, and is split (`Executor::split_groups`).
-    fn fair_group_share(&self, predicted_s: &[f64]) -> f64 {
-        let total: f64 = predicted_s.iter().sum();
-        let modelled = self.workers_for_stage(
-            Stage::StepGroups,
-            total,
-            predicted_s.len(),
-            SELF_SCHEDULED_SHARE,
-        );
-        let workers = self.group_choice.workers(
-            modelled,
-            self.workers_without_link(total),
-            predicted_s.len(),
-        );
-        if workers == 0 || !self.split_where_it_pays {
-            f64::INFINITY
-        } else {
-            total / (1 + workers) as f64
-        }
+    /// Workers for a group stage of `total` predicted seconds over `tasks`
+    /// tasks: (the cost model's, the one taken), the measured times
+    /// (`group_choice`, `StageChoice`) sending it out where the model
+    /// would keep it on rank 0.
+    fn group_workers(&self, total: f64, tasks: usize) -> (usize, usize) {
+        let modelled =
+            self.workers_for_stage(Stage::StepGroups, total, tasks, SELF_SCHEDULED_SHARE);
+        let workers = self
+            .group_choice
+            .workers(modelled, self.workers_without_link(total), tasks);
+        (modelled, workers)
     }
 }
 
@@ -1087,12 +1086,7 @@ impl MpiExecutor<'_> {
         // Seconds, from what the same bodies' groups took last step.
         let costs: Vec<f64> = inputs.iter().map(GroupInput::predicted_s).collect();
         let total: f64 = costs.iter().sum();
-        let modelled =
-            self.workers_for_stage(Stage::StepGroups, total, inputs.len(), SELF_SCHEDULED_SHARE);
-        // Where measured times send the groups out (`StageChoice`).
-        let workers =
-            self.group_choice
-                .workers(modelled, self.workers_without_link(total), inputs.len());
+        let (modelled, workers) = self.group_workers(total, inputs.len());
         if workers > 0 && modelled == 0 {
             self.dist.groups_by_measure += 1;
         }
@@ -1165,11 +1159,7 @@ impl MpiExecutor<'_> {
             .collect();
         let total: f64 = costs.iter().sum();
         let pairs: usize = inputs.iter().map(GroupInput::pair_count).sum();
-        let modelled =
-            self.workers_for_stage(Stage::StepGroups, total, pairs, SELF_SCHEDULED_SHARE);
-        let workers = self
-            .group_choice
-            .workers(modelled, self.workers_without_link(total), pairs);
+        let (_, workers) = self.group_workers(total, pairs);
         if workers == 0 {
             let clock = Instant::now();
             let prepared: Vec<PreparedPairs> = inputs

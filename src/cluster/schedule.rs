@@ -276,19 +276,15 @@ impl StageChoice {
         if modelled > 0 || workers == 0 || tasks < 2 {
             return modelled;
         }
-        let (home, out) = (self.local_s_per_cost, self.distributed_s_per_cost);
-        let faster_out = home > 0.0 && out > 0.0 && out < home * (1.0 - DISTRIBUTE_MARGIN);
-        if faster_out || self.home_in_a_row >= PROBE_EVERY {
-            workers
-        } else {
-            0
-        }
+        if self.goes_out() { workers } else { 0 }
     }
 
-    /// Whether the other way (out) goes now by the measures alone: it
-    /// measured faster by `DISTRIBUTE_MARGIN`, or a probe of it is due.
+    /// Whether the measures alone send the stage out now: it measured
+    /// faster out by `DISTRIBUTE_MARGIN`, or a probe of it is due.
     pub fn goes_out(&self) -> bool {
-        self.workers(0, 1, 2) > 0
+        let (home, out) = (self.local_s_per_cost, self.distributed_s_per_cost);
+        let faster_out = home > 0.0 && out > 0.0 && out < home * (1.0 - DISTRIBUTE_MARGIN);
+        faster_out || self.home_in_a_row >= PROBE_EVERY
     }
 
     /// Records a step's stage: whether it went out, its predicted cost and

@@ -51,6 +51,25 @@ pub(crate) fn question(q: &impl Serialize) -> Vec<u8> {
     bincode::serde::encode_to_vec(q, bincode::config::standard()).expect("a question encodes")
 }
 
+/// Answers `question` from `kept` if it holds it, else by `ask`, keeping
+/// that answer (about `answer_bytes` large).
+pub(crate) fn one_again_or_anew<V: Clone>(
+    kept: &'static std::thread::LocalKey<std::cell::RefCell<Kept<V>>>,
+    question: Vec<u8>,
+    ask: impl FnOnce() -> V,
+    answer_bytes: usize,
+) -> V {
+    if let Some(answer) = kept.with(|kept| kept.borrow().get(&question)) {
+        return answer;
+    }
+    let answer = ask();
+    kept.with(|kept| {
+        kept.borrow_mut()
+            .keep(question, answer.clone(), answer_bytes)
+    });
+    answer
+}
+
 /// Answers `questions` from `kept` where it holds them and by `ask` for the
 /// rest (in their order, in one call), keeping those: `None` questions are
 /// never kept. `size` estimates an answer's bytes.

@@ -75,9 +75,9 @@ pub(crate) struct Region<'s> {
     pub pair_forces: BTreeMap<(BodyId, BodyId), f64>,
     /// Integrations along segments already done (`integrate_segment`).
     pub integrated: Integrated,
-    /// Whether its island answers are kept for a later run of the same
-    /// events (`solve_again_or_anew`): a part of a split group, which may
-    /// step again merged with the parts it met.
+    /// Whether its island answers, times of impact and pair tests are kept
+    /// for a later run of the same events (`super::kept`): a part of a
+    /// split group, which may step again merged with the parts it met.
     pub keep_answers: bool,
 }
 

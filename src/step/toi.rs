@@ -122,13 +122,12 @@ impl Region<'_> {
             r,
             self.features.get(&k),
         ));
-        kept::again_or_anew(
+        kept::one_again_or_anew(
             &KEPT,
-            vec![()],
-            vec![Some(question)],
-            |_| vec![self.time_of_impact_searched(k, r, seg, (start, h), since)],
-            |_| 16,
-        )[0]
+            question,
+            || self.time_of_impact_searched(k, r, seg, (start, h), since),
+            16,
+        )
     }
 
     /// `time_of_impact_within`, searched.
