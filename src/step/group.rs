@@ -1058,14 +1058,20 @@ pub(crate) fn step_groups<'s>(
     };
     // The large groups' first stage, through the executor, then their parts.
     let whole = plan_groups(world, start);
-    let chosen = exec.split_groups(
-        &whole
-            .iter()
-            .map(|p| (predicted_s(start, p), p.members.len()))
-            .collect::<Vec<_>>(),
-    );
+    // `--split-groups` splits them all; otherwise the executor chooses
+    // (and measures its choice).
+    let chosen = if st.split_groups {
+        vec![true; whole.len()]
+    } else {
+        exec.split_groups(
+            &whole
+                .iter()
+                .map(|p| (predicted_s(start, p), p.members.len()))
+                .collect::<Vec<_>>(),
+        )
+    };
     let large: Vec<usize> = (0..whole.len())
-        .filter(|&p| whole[p].members.len() >= SPLIT_MIN_MEMBERS && (st.split_groups || chosen[p]))
+        .filter(|&p| whole[p].members.len() >= SPLIT_MIN_MEMBERS && chosen[p])
         .collect();
     let inputs = large
         .iter()
