@@ -110,7 +110,8 @@ fn main() {
     println!(
         "total {wall:.3} s; rows solved {}, largest {}, pivots {}, \
          compliant {}, iterative {} ({} sweeps, {} unconverged), failed {}; \
-         worst violation {:.1e} m/s, {missed} islands above 1e-8 m/s",
+         worst violation {:.1e} m/s, {missed} islands above 1e-8 m/s; \
+         interior point {} met, {} missed, {} Newton steps",
         total.rows,
         total.largest_rows,
         total.pivots,
@@ -119,7 +120,10 @@ fn main() {
         total.iterative_sweeps,
         total.iterative_unconverged,
         total.failed,
-        total.worst_violation
+        total.worst_violation,
+        total.interior_solves,
+        total.interior_missed,
+        total.interior_steps
     );
     let seconds: f64 = by_path.iter().map(|p| p.1).sum();
     println!(
@@ -146,8 +150,10 @@ fn main() {
 /// The paths an island's solves can take (`solve_phase`), most telling
 /// first: an island is counted under the first that applies to either of
 /// its two solves.
-const PATHS: [&str; 7] = [
+const PATHS: [&str; 9] = [
     "failed (fallback answer)",
+    "interior point missed, then as below",
+    "interior point (met)",
     "sequential impulses unconverged, then Dantzig",
     "sequential impulses unconverged, kept (400 rows and more)",
     "sequential impulses converged",
@@ -159,17 +165,21 @@ const PATHS: [&str; 7] = [
 fn path_of(st: &SolveStats) -> usize {
     if st.failed > 0 {
         0
-    } else if st.iterative_solves > 0 && st.lcp_solves > 0 {
+    } else if st.interior_missed > 0 {
         1
-    } else if st.iterative_unconverged > 0 {
+    } else if st.interior_solves > 0 && st.lcp_solves == 0 && st.iterative_solves == 0 {
         2
-    } else if st.iterative_solves > 0 {
+    } else if st.iterative_solves > 0 && st.lcp_solves > 0 {
         3
-    } else if st.iterative_rescues > 0 {
+    } else if st.iterative_unconverged > 0 {
         4
-    } else if st.compliant_solves > 0 {
+    } else if st.iterative_solves > 0 {
         5
-    } else {
+    } else if st.iterative_rescues > 0 {
         6
+    } else if st.compliant_solves > 0 {
+        7
+    } else {
+        8
     }
 }

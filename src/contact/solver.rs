@@ -106,7 +106,9 @@ pub struct IslandTask {
     /// Collisions slower than this converge to contact (ε = 0): g·dt/2.
     pub restitution_threshold: f64,
     /// Rows from which the island is solved by sequential impulses
-    /// (`ITERATIVE_MIN_ROWS` unless a test lowers it).
+    /// (`ITERATIVE_MIN_ROWS` unless a test lowers it). `u32::MAX`: by
+    /// Dantzig's method alone, without the interior point either (tests
+    /// compare the methods so).
     pub iterative_min_rows: u32,
 }
 
@@ -174,6 +176,12 @@ pub struct SolveStats {
     /// `failed`, and the safe answer it applies instead (no restitution, or
     /// no friction) meets another system's conditions on purpose.
     pub worst_violation: f64,
+    /// Solves answered by the interior-point method (`interior`), its
+    /// Newton steps (all its solves), and its solves that missed the
+    /// conditions and went on to the other methods.
+    pub interior_solves: u32,
+    pub interior_steps: u64,
+    pub interior_missed: u32,
 }
 
 /// Rows from which a system counts in `SolveStats::large_systems`: where
@@ -210,6 +218,9 @@ impl SolveStats {
         self.largest_rows = self.largest_rows.max(o.largest_rows);
         self.large_systems += o.large_systems;
         self.worst_violation = self.worst_violation.max(o.worst_violation);
+        self.interior_solves += o.interior_solves;
+        self.interior_steps += o.interior_steps;
+        self.interior_missed += o.interior_missed;
     }
 }
 
@@ -252,26 +263,26 @@ impl Row {
     }
 
     /// J on A and on B, linear then angular (for `lcp::RowFactors`).
-    fn jacobian(&self) -> [[f64; 6]; 2] {
+    pub(super) fn jacobian(&self) -> [[f64; 6]; 2] {
         let side =
             |lin: Vector3<f64>, ang: Vector3<f64>| [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z];
         [side(self.lin, self.ang_a), side(-self.lin, self.ang_b)]
     }
 
     /// M⁻¹Jᵀ on A and on B, linear then angular (for `lcp::RowFactors`).
-    fn response(&self) -> [[f64; 6]; 2] {
+    pub(super) fn response(&self) -> [[f64; 6]; 2] {
         let side = |dv: Vector3<f64>, dw: Vector3<f64>| [dv.x, dv.y, dv.z, dw.x, dw.y, dw.z];
         [side(self.dva, self.dwa), side(self.dvb, self.dwb)]
     }
 
     /// Relative velocity along the row: J·v.
-    fn velocity(&self, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> f64 {
+    pub(super) fn velocity(&self, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> f64 {
         self.lin.dot(&v[self.a]) + self.ang_a.dot(&w[self.a]) - self.lin.dot(&v[self.b])
             + self.ang_b.dot(&w[self.b])
     }
 
     /// Adds the velocity change of an impulse `p` on this row to both bodies.
-    fn change_velocities(&self, p: f64, v: &mut [Vector3<f64>], w: &mut [Vector3<f64>]) {
+    pub(super) fn change_velocities(&self, p: f64, v: &mut [Vector3<f64>], w: &mut [Vector3<f64>]) {
         v[self.a] += self.dva * p;
         w[self.a] += self.dwa * p;
         v[self.b] += self.dvb * p;
@@ -763,6 +774,50 @@ fn solve_phase(
             max_sweeps,
         )
     };
+    let system = IterativeSystem::new(&rows, &diag, &rhs, &lo, &hi, &findex);
+    let warm_is_close = m >= FACTORED_MIN_ROWS
+        && system.worst_miss(&system.warm_state(&warm, v.len())) <= WARM_CLOSE;
+    let iterative = m >= task.iterative_min_rows as usize;
+    // Below `ITERATIVE_MIN_ROWS` the interior point's answer is where
+    // Dantzig's method starts, so that the answer stays exact (Dantzig's).
+    let mut interior = None;
+    if m >= INTERIOR_MIN_ROWS
+        && task.iterative_min_rows != u32::MAX
+        && (iterative || !warm_is_close)
+        && super::interior::takes(&rows, v.len())
+    {
+        // A system at rest (a stack) meets the conditions in the warm
+        // start's subspace step, a stack's impact in a few sweeps.
+        if iterative {
+            let (p, met, sweeps) = sweeps_of(ITERATIVE_CHECK_EVERY);
+            stats.iterative_sweeps += sweeps as u64;
+            if met {
+                stats.iterative_solves += 1;
+                note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
+                let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
+                let sum = normal_sum(&p);
+                return (rows, p, sum);
+            }
+        }
+        // Below `ITERATIVE_MIN_ROWS`, where Dantzig's answers are, on the
+        // exact system: no compliance.
+        let strict = IterativeSystem {
+            compliance: if iterative { system.compliance } else { 0.0 },
+            ..system
+        };
+        if let Some(answer) = super::interior::solve(&strict, &warm, v.len()) {
+            stats.interior_steps += answer.steps as u64;
+            if answer.met {
+                stats.interior_solves += 1;
+                let p = answer.p;
+                note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
+                let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
+                let sum = normal_sum(&p);
+                return (rows, p, sum);
+            }
+            stats.interior_missed += 1;
+        }
+    }
     let mut unconverged = None;
     if m >= task.iterative_min_rows as usize {
         stats.iterative_solves += 1;
@@ -782,19 +837,16 @@ fn solve_phase(
     // Below that, from `FACTORED_MIN_ROWS` rows: a few sweeps first, whose
     // answer is where Dantzig's method starts (`START_SWEEPS`), unless the
     // last step's impulses are that close already (`WARM_CLOSE`).
-    let warm_close = || {
-        let system = IterativeSystem::new(&rows, &diag, &rhs, &lo, &hi, &findex);
-        system.worst_miss(&system.warm_state(&warm, v.len())) <= WARM_CLOSE
-    };
     let swept = (unconverged.is_none()
+        && interior.is_none()
         && m >= FACTORED_MIN_ROWS
         && m < task.iterative_min_rows as usize
-        && !warm_close())
-    .then(|| {
-        let (p, met, sweeps) = sweeps_of(START_SWEEPS);
-        stats.iterative_sweeps += sweeps as u64;
-        (p, met)
-    });
+        && !warm_is_close)
+        .then(|| {
+            let (p, met, sweeps) = sweeps_of(START_SWEEPS);
+            stats.iterative_sweeps += sweeps as u64;
+            (p, met)
+        });
 
     let mut a = vec![0.0; m * m];
     for i in 0..m {
@@ -815,6 +867,7 @@ fn solve_phase(
     let warm_started = m >= FACTORED_MIN_ROWS;
     let start = unconverged
         .clone()
+        .or_else(|| interior.clone())
         .or_else(|| swept.as_ref().map(|(p, _)| p.clone()))
         .or_else(|| warm.iter().any(|&x| x != 0.0).then(|| warm.clone()))
         .filter(|_| warm_started);
@@ -850,6 +903,8 @@ fn solve_phase(
         // to COMPLIANT_RETRY_ROWS only: compliance clamps every redundant
         // row too, and on the 800 rows of a stack of 50 one retry took
         // seconds, where Gauss-Seidel takes milliseconds.
+        // The interior point's answer meets the conditions already.
+        Err(_) if interior.is_some() => interior.take().unwrap_or_default(),
         Err(e) => match (m <= COMPLIANT_RETRY_ROWS)
             .then(|| solve(&compliant(&a, m), &options))
             .unwrap_or_else(|| Err(e.clone()))
@@ -1242,6 +1297,10 @@ fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -
 /// 1e-5).
 const FACTORED_MIN_ROWS: usize = 64;
 
+/// Rows from which a system not at rest is solved by the interior-point
+/// method (`interior`) first.
+const INTERIOR_MIN_ROWS: usize = FACTORED_MIN_ROWS;
+
 /// Rows from which an island is solved by sequential impulses with the
 /// subspace step instead of Dantzig's method. Dantzig's cost grows with the
 /// cube of the rows, and on redundant systems this large its friction
@@ -1386,29 +1445,29 @@ fn sequential_impulses(
 
 /// The boxed LCP the iterative solve works on, w = (A + c·diag) p + b with
 /// c = `compliance`, held as its rows (A is never formed).
-struct IterativeSystem<'a> {
-    rows: &'a [Row],
-    diag: &'a [f64],
-    b: &'a [f64],
-    lo: &'a [f64],
-    hi: &'a [f64],
-    findex: &'a [Option<usize>],
-    compliance: f64,
+pub(super) struct IterativeSystem<'a> {
+    pub(super) rows: &'a [Row],
+    pub(super) diag: &'a [f64],
+    pub(super) b: &'a [f64],
+    pub(super) lo: &'a [f64],
+    pub(super) hi: &'a [f64],
+    pub(super) findex: &'a [Option<usize>],
+    pub(super) compliance: f64,
     /// How far w may miss the conditions (m/s).
-    tolerance: f64,
+    pub(super) tolerance: f64,
 }
 
 /// The impulses of an iterative solve and the velocity changes they give
 /// the bodies (M⁻¹Jᵀp), kept in step.
 #[derive(Clone)]
-struct IterativeState {
-    p: Vec<f64>,
-    dv: Vec<Vector3<f64>>,
-    dw: Vec<Vector3<f64>>,
+pub(super) struct IterativeState {
+    pub(super) p: Vec<f64>,
+    pub(super) dv: Vec<Vector3<f64>>,
+    pub(super) dw: Vec<Vector3<f64>>,
 }
 
 /// What became of a subspace step.
-enum Step {
+pub(super) enum Step {
     Kept,
     Rejected,
     /// No row was free, or the factorisation failed.
@@ -1458,7 +1517,7 @@ impl<'a> IterativeSystem<'a> {
 
     /// Row i's bounds; a friction row's are its coefficients times its
     /// normal row's impulse.
-    fn bounds(&self, i: usize, p: &[f64]) -> (f64, f64) {
+    pub(super) fn bounds(&self, i: usize, p: &[f64]) -> (f64, f64) {
         match self.findex[i] {
             None => (self.lo[i], self.hi[i]),
             Some(k) => (self.lo[i] * p[k].abs(), self.hi[i] * p[k].abs()),
@@ -1466,19 +1525,19 @@ impl<'a> IterativeSystem<'a> {
     }
 
     /// w_i = (A p + b)_i + c·A_ii·p_i.
-    fn velocity(&self, i: usize, s: &IterativeState) -> f64 {
+    pub(super) fn velocity(&self, i: usize, s: &IterativeState) -> f64 {
         self.b[i] + self.rows[i].velocity(&s.dv, &s.dw) + self.compliance * self.diag[i] * s.p[i]
     }
 
     /// Whether the rows that can take an impulse meet the LCP's conditions
     /// to `tolerance`: w ≥ 0 at a lower bound, w ≤ 0 at an upper one, w = 0
     /// between.
-    fn met(&self, s: &IterativeState) -> bool {
+    pub(super) fn met(&self, s: &IterativeState) -> bool {
         (0..self.rows.len()).all(|i| self.miss(i, s) <= self.tolerance)
     }
 
     /// The largest amount by which a row misses its condition (m/s).
-    fn worst_miss(&self, s: &IterativeState) -> f64 {
+    pub(super) fn worst_miss(&self, s: &IterativeState) -> f64 {
         (0..self.rows.len())
             .map(|i| self.miss(i, s))
             .fold(0.0, f64::max)
@@ -1487,7 +1546,7 @@ impl<'a> IterativeSystem<'a> {
     /// How far (m/s) row i misses its condition: w_i below 0 at its lower
     /// bound, above 0 at its upper one, off 0 between; zero for a row no
     /// impulse moves. NaN where w_i is (so that `met` fails on it).
-    fn miss(&self, i: usize, s: &IterativeState) -> f64 {
+    pub(super) fn miss(&self, i: usize, s: &IterativeState) -> f64 {
         if self.diag[i] <= 1e-300 {
             return 0.0;
         }
@@ -1545,7 +1604,7 @@ impl<'a> IterativeSystem<'a> {
     /// bounds that follow the normal impulses the answer is no minimum of
     /// it, and near the answer good steps raise it (judged that way, a
     /// stack of 100 swayed 5 mm).
-    fn subspace_step(&self, by_body: &[Vec<usize>], s: &mut IterativeState) -> Step {
+    pub(super) fn subspace_step(&self, by_body: &[Vec<usize>], s: &mut IterativeState) -> Step {
         let m = self.rows.len();
         let free: Vec<usize> = (0..m)
             .filter(|&i| {
@@ -1771,6 +1830,118 @@ mod tests {
             restitution_threshold: 0.05,
             iterative_min_rows,
         }
+    }
+
+    /// A stack of six 1 kg cubes (side 1 m) on a fixed floor, each resting
+    /// on the one below at its four corners with friction (72 rows: four
+    /// corners carry each load, so the rows are redundant and the impulses
+    /// not unique).
+    /// The top cube slides along x at `slide` m/s.
+    fn cube_stack_task(n: usize, slide: f64, iterative_min_rows: u32) -> IslandTask {
+        let floor = fixed_body(Vector3::zeros());
+        let mut bodies = vec![floor.clone()];
+        for k in 1..=n {
+            bodies.push(IslandBody {
+                id: BodyId(k as u32),
+                inv_mass: 1.0,
+                inv_inertia: Matrix3::identity() * 6.0,
+                position: Vector3::new(0.0, 0.0, k as f64 - 0.5),
+                velocity: Vector3::new(if k == n { slide } else { 0.0 }, 0.0, 0.0),
+                external_dv: Vector3::new(0.0, 0.0, -9.81 * 0.01),
+                ..floor.clone()
+            });
+        }
+        let mut contacts = Vec::new();
+        for k in 0..n {
+            for (x, y) in [(0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)] {
+                contacts.push(IslandContact {
+                    a: k as u32 + 1,
+                    b: k as u32,
+                    point: Vector3::new(x, y, k as f64),
+                    normal: Vector3::z(),
+                    restitution: 0.0,
+                    friction: 0.5,
+                    separation: 0.0,
+                    warm_force: 0.0,
+                    warm_friction: Vector3::zeros(),
+                    turns: NormalTurn::WithB,
+                });
+            }
+        }
+        IslandTask {
+            bodies,
+            contacts,
+            dt: 0.01,
+            restitution_threshold: 0.05,
+            iterative_min_rows,
+        }
+    }
+
+    /// The interior point on the stack of six cubes (72 rows, from no warm
+    /// start), at rest and with the top cube sliding at 1 m/s: each cube's
+    /// four corners carry k·m·g together; at rest no friction acts, and
+    /// under the sliding cube every contact holds μ·m·g against the slide
+    /// (kinetic on top, static below, passed down); every body's velocity
+    /// change is Dantzig's (the task with `iterative_min_rows` = u32::MAX,
+    /// Dantzig's method alone). To 1e-8 m/s, the conditions' tolerance
+    /// (`ITERATIVE_FLOOR`), and in force to what that is over the step,
+    /// 1e-8 m/s · 1 kg / 0.01 s = 1e-6 N (seen: 4e-8 N, 2e-10 m/s).
+    #[test]
+    fn interior_point_holds_a_redundant_stack_as_dantzig_does() {
+        let (n, mu, g) = (6, 0.5, 9.81);
+        let (mut worst_force, mut worst_velocity) = (0.0f64, 0.0f64);
+        for slide in [0.0, 1.0] {
+            let task = cube_stack_task(n, slide, ITERATIVE_MIN_ROWS as u32);
+            let r = solve_island(&task);
+            assert_eq!(r.stats.largest_rows, 72);
+            assert_eq!(
+                (
+                    r.stats.interior_solves,
+                    r.stats.lcp_solves,
+                    r.stats.iterative_solves
+                ),
+                (1, 0, 0),
+                "{:?}",
+                r.stats
+            );
+            for k in 0..n {
+                let load: f64 = r.contact_force[4 * k..4 * k + 4].iter().sum();
+                let expected = (n - k) as f64 * g;
+                assert!((load - expected).abs() <= 1e-6, "contact {k}: {load} N");
+                let friction: Vector3<f64> = r.contact_friction[4 * k..4 * k + 4].iter().sum();
+                let held = Vector3::new(-mu * g * slide, 0.0, 0.0);
+                assert!(
+                    (friction - held).norm() <= 1e-6,
+                    "contact {k}: friction {friction}"
+                );
+                worst_force = worst_force
+                    .max((load - expected).abs())
+                    .max((friction - held).norm());
+            }
+            let exact = solve_island(&cube_stack_task(n, slide, u32::MAX));
+            assert_eq!(
+                (exact.stats.interior_solves, exact.stats.lcp_solves),
+                (0, 1)
+            );
+            for k in 1..=n {
+                let change = |r: &IslandResult| {
+                    let body = &task.bodies[k];
+                    (
+                        (r.impulse[k] + r.force[k] * task.dt) * body.inv_mass,
+                        body.inv_inertia * (r.angular_impulse[k] + r.torque[k] * task.dt),
+                    )
+                };
+                let ((dv, dw), (ev, ew)) = (change(&r), change(&exact));
+                assert!(
+                    (dv - ev).norm() <= 1e-8 && (dw - ew).norm() <= 1e-8,
+                    "slide {slide}, body {k}: {dv} {dw} vs {ev} {ew}"
+                );
+                worst_velocity = worst_velocity.max((dv - ev).norm()).max((dw - ew).norm());
+            }
+        }
+        eprintln!(
+            "cube stack: worst force {worst_force:.1e} N, worst velocity {worst_velocity:.1e} m/s"
+        );
     }
 
     /// The system sizes and sweeps a solve reports (`summary.json`'s

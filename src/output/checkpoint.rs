@@ -49,8 +49,9 @@ pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// `group_reruns`). 8: the time each fallen body fell (`World::fallen`).
 /// 9: the solver's system sizes and sweeps (`SolveStats::iterative_sweeps`,
 /// `largest_rows`, `large_systems`). 10: the solver's worst violation
-/// (`SolveStats::worst_violation`).
-pub const FORMAT: u32 = 10;
+/// (`SolveStats::worst_violation`). 11: the interior-point solves
+/// (`SolveStats::interior_solves`, `interior_steps`, `interior_missed`).
+pub const FORMAT: u32 = 11;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";
