@@ -778,9 +778,14 @@ fn solve_phase(
     let warm_is_close = m >= FACTORED_MIN_ROWS
         && system.worst_miss(&system.warm_state(&warm, v.len())) <= WARM_CLOSE;
     let iterative = m >= task.iterative_min_rows as usize;
-    // Below `ITERATIVE_MIN_ROWS` the interior point's answer is where
-    // Dantzig's method starts, so that the answer stays exact (Dantzig's).
-    let mut interior = None;
+    // An answer of the iterative system (the sweeps' or the interior
+    // point's): its violation noted, the energy guard's iterative check.
+    let keep = |p: Vec<f64>, stats: &mut SolveStats| {
+        note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
+        let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
+        let sum = normal_sum(&p);
+        (p, sum)
+    };
     if m >= INTERIOR_MIN_ROWS
         && task.iterative_min_rows != u32::MAX
         && (iterative || !warm_is_close)
@@ -793,9 +798,7 @@ fn solve_phase(
             stats.iterative_sweeps += sweeps as u64;
             if met {
                 stats.iterative_solves += 1;
-                note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
-                let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
-                let sum = normal_sum(&p);
+                let (p, sum) = keep(p, stats);
                 return (rows, p, sum);
             }
         }
@@ -809,10 +812,7 @@ fn solve_phase(
             stats.interior_steps += answer.steps as u64;
             if answer.met {
                 stats.interior_solves += 1;
-                let p = answer.p;
-                note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
-                let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
-                let sum = normal_sum(&p);
+                let (p, sum) = keep(answer.p, stats);
                 return (rows, p, sum);
             }
             stats.interior_missed += 1;
@@ -827,9 +827,7 @@ fn solve_phase(
             stats.iterative_unconverged += 1;
         }
         if met || m >= DANTZIG_MAX_ROWS {
-            note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
-            let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
-            let sum = normal_sum(&p);
+            let (p, sum) = keep(p, stats);
             return (rows, p, sum);
         }
         unconverged = Some(p);
@@ -838,7 +836,6 @@ fn solve_phase(
     // answer is where Dantzig's method starts (`START_SWEEPS`), unless the
     // last step's impulses are that close already (`WARM_CLOSE`).
     let swept = (unconverged.is_none()
-        && interior.is_none()
         && m >= FACTORED_MIN_ROWS
         && m < task.iterative_min_rows as usize
         && !warm_is_close)
@@ -867,7 +864,6 @@ fn solve_phase(
     let warm_started = m >= FACTORED_MIN_ROWS;
     let start = unconverged
         .clone()
-        .or_else(|| interior.clone())
         .or_else(|| swept.as_ref().map(|(p, _)| p.clone()))
         .or_else(|| warm.iter().any(|&x| x != 0.0).then(|| warm.clone()))
         .filter(|_| warm_started);
@@ -903,8 +899,6 @@ fn solve_phase(
         // to COMPLIANT_RETRY_ROWS only: compliance clamps every redundant
         // row too, and on the 800 rows of a stack of 50 one retry took
         // seconds, where Gauss-Seidel takes milliseconds.
-        // The interior point's answer meets the conditions already.
-        Err(_) if interior.is_some() => interior.take().unwrap_or_default(),
         Err(e) => match (m <= COMPLIANT_RETRY_ROWS)
             .then(|| solve(&compliant(&a, m), &options))
             .unwrap_or_else(|| Err(e.clone()))
@@ -1794,50 +1788,9 @@ mod tests {
         }
     }
 
-    /// A frictionless stack of `n` 1 kg bodies at rest on a fixed floor, as
-    /// an island task (resting phase only: nothing approaches).
-    fn resting_stack_task(n: usize, iterative_min_rows: u32) -> IslandTask {
-        let floor = fixed_body(Vector3::zeros());
-        let mut bodies = vec![floor.clone()];
-        for k in 1..=n {
-            bodies.push(IslandBody {
-                id: BodyId(k as u32),
-                inv_mass: 1.0,
-                inv_inertia: Matrix3::identity() * 6.0,
-                position: Vector3::new(0.0, 0.0, k as f64 - 0.5),
-                external_dv: Vector3::new(0.0, 0.0, -9.81 * 0.01),
-                ..floor.clone()
-            });
-        }
-        let contacts = (0..n)
-            .map(|k| IslandContact {
-                a: k as u32 + 1,
-                b: k as u32,
-                point: Vector3::new(0.0, 0.0, k as f64),
-                normal: Vector3::z(),
-                restitution: 0.0,
-                friction: 0.0,
-                separation: 0.0,
-                warm_force: 0.0,
-                warm_friction: Vector3::zeros(),
-                turns: NormalTurn::WithB,
-            })
-            .collect();
-        IslandTask {
-            bodies,
-            contacts,
-            dt: 0.01,
-            restitution_threshold: 0.05,
-            iterative_min_rows,
-        }
-    }
-
-    /// A stack of six 1 kg cubes (side 1 m) on a fixed floor, each resting
-    /// on the one below at its four corners with friction (72 rows: four
-    /// corners carry each load, so the rows are redundant and the impulses
-    /// not unique).
-    /// The top cube slides along x at `slide` m/s.
-    fn cube_stack_task(n: usize, slide: f64, iterative_min_rows: u32) -> IslandTask {
+    /// A fixed floor and `n` 1 kg unit bodies stacked on it under gravity
+    /// over a 0.01 s step, the top one moving along x at `slide` m/s.
+    fn stacked_bodies(n: usize, slide: f64) -> Vec<IslandBody> {
         let floor = fixed_body(Vector3::zeros());
         let mut bodies = vec![floor.clone()];
         for k in 1..=n {
@@ -1851,16 +1804,43 @@ mod tests {
                 ..floor.clone()
             });
         }
+        bodies
+    }
+
+    /// A frictionless stack of `n` 1 kg bodies at rest on a fixed floor, as
+    /// an island task (resting phase only: nothing approaches).
+    fn resting_stack_task(n: usize, iterative_min_rows: u32) -> IslandTask {
+        stack_task(n, &[(0.0, 0.0)], 0.0, 0.0, iterative_min_rows)
+    }
+
+    /// A stack of `n` 1 kg cubes (side 1 m) on a fixed floor, each resting
+    /// on the one below at its four corners with friction (12 rows a cube:
+    /// four corners carry each load, so the rows are redundant and the
+    /// impulses not unique). The top cube slides along x at `slide` m/s.
+    fn cube_stack_task(n: usize, slide: f64, iterative_min_rows: u32) -> IslandTask {
+        let corners = [(0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)];
+        stack_task(n, &corners, 0.5, slide, iterative_min_rows)
+    }
+
+    /// `stacked_bodies`, each on the one below at `points` (x, y) of the
+    /// plane between them, with friction coefficient `friction`.
+    fn stack_task(
+        n: usize,
+        points: &[(f64, f64)],
+        friction: f64,
+        slide: f64,
+        iterative_min_rows: u32,
+    ) -> IslandTask {
         let mut contacts = Vec::new();
         for k in 0..n {
-            for (x, y) in [(0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)] {
+            for &(x, y) in points {
                 contacts.push(IslandContact {
                     a: k as u32 + 1,
                     b: k as u32,
                     point: Vector3::new(x, y, k as f64),
                     normal: Vector3::z(),
                     restitution: 0.0,
-                    friction: 0.5,
+                    friction,
                     separation: 0.0,
                     warm_force: 0.0,
                     warm_friction: Vector3::zeros(),
@@ -1869,7 +1849,7 @@ mod tests {
             }
         }
         IslandTask {
-            bodies,
+            bodies: stacked_bodies(n, slide),
             contacts,
             dt: 0.01,
             restitution_threshold: 0.05,
