@@ -42,6 +42,19 @@ fn describe(name: &str, s: &SolveStats) -> String {
     )
 }
 
+/// Body k's velocity and angular velocity change over the step from an
+/// island's answer: its impulse and its constant force over dt.
+fn velocity_change(
+    task: &IslandTask,
+    r: &IslandResult,
+    k: usize,
+) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
+    let body = &task.bodies[k];
+    let dv = (r.impulse[k] + r.force[k] * task.dt) * body.inv_mass;
+    let dw = body.inv_inertia * (r.angular_impulse[k] + r.torque[k] * task.dt);
+    (dv, dw)
+}
+
 /// How far an answer may miss its conditions: the iterative solve's
 /// tolerance (1e-8 m/s at these speeds, `ITERATIVE_FLOOR`), met on the
 /// slightly compliant system, plus what that compliance (1e-9 of the
@@ -138,12 +151,8 @@ fn the_pyramid_answers_alike_by_both_methods() {
     }
     assert!(iterative.stats.iterative_solves > 0 && exact.stats.iterative_solves == 0);
     let mut worst: f64 = 0.0;
-    for (k, body) in task.bodies.iter().enumerate() {
-        let change = |r: &IslandResult| {
-            let dv = (r.impulse[k] + r.force[k] * task.dt) * body.inv_mass;
-            let dw = body.inv_inertia * (r.angular_impulse[k] + r.torque[k] * task.dt);
-            (dv, dw)
-        };
+    for k in 0..task.bodies.len() {
+        let change = |r: &IslandResult| velocity_change(&task, r, k);
         let ((v1, w1), (v2, w2)) = (change(&iterative), change(&exact));
         worst = worst.max((v1 - v2).norm()).max((w1 - w2).norm());
     }
@@ -278,11 +287,7 @@ fn interior_answers_move_the_bodies_as_dantzig_does() {
         let p = (total(&interior) + total(&exact)) * task.dt;
         let (mut worst, mut apart): (f64, f64) = (0.0, 0.0);
         for (k, body) in task.bodies.iter().enumerate() {
-            let change = |r: &IslandResult| {
-                let dv = (r.impulse[k] + r.force[k] * task.dt) * body.inv_mass;
-                let dw = body.inv_inertia * (r.angular_impulse[k] + r.torque[k] * task.dt);
-                (dv, dw)
-            };
+            let change = |r: &IslandResult| velocity_change(&task, r, k);
             let ((dv, dw), (ev, ew)) = (change(&interior), change(&exact));
             let spin = body.inv_inertia.symmetric_eigenvalues().max();
             let (bound_v, bound_w) = (

@@ -545,7 +545,8 @@ fn finish(
 ) -> InteriorAnswer {
     // A dead row's p stays 0: no step moves it (`ginv`).
     let mut state = state_of(system, p, bodies);
-    let by_body = subspace::rows_by_body(system.rows, bodies);
+    // Only where a subspace step may be taken.
+    let by_body = (last || polish).then(|| subspace::rows_by_body(system.rows, bodies));
     let rounds = if last {
         4
     } else if polish {
@@ -562,10 +563,10 @@ fn finish(
                 steps: 0,
             };
         }
-        if !last && !polish {
+        let Some(by_body) = &by_body else {
             break;
-        }
-        match system.subspace_step(&by_body, &mut state) {
+        };
+        match system.subspace_step(by_body, &mut state) {
             Step::Kept => {}
             _ => break,
         }

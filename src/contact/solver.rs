@@ -775,9 +775,13 @@ fn solve_phase(
         )
     };
     let system = IterativeSystem::new(&rows, &diag, &rhs, &lo, &hi, &findex);
-    let warm_is_close = m >= FACTORED_MIN_ROWS
-        && system.worst_miss(&system.warm_state(&warm, v.len())) <= WARM_CLOSE;
     let iterative = m >= task.iterative_min_rows as usize;
+    // Asked only below `ITERATIVE_MIN_ROWS` (where the start sweeps and the
+    // interior point wait for it); from there the sweeps' warm subspace
+    // step tells the same.
+    let warm_is_close = !iterative
+        && m >= FACTORED_MIN_ROWS
+        && system.worst_miss(&system.warm_state(&warm, v.len())) <= WARM_CLOSE;
     // An answer of the iterative system (the sweeps' or the interior
     // point's): its violation noted, the energy guard's iterative check.
     let keep = |p: Vec<f64>, stats: &mut SolveStats| {
