@@ -33,14 +33,13 @@ use nalgebra::Vector3;
 /// as before).
 const MAX_STEPS: usize = 60;
 /// Moving bodies at most. The Newton systems are factored block by block
-/// in the bodies' contact graph (`block_lu`), six unknowns a body, and
-/// densely (with pivoting) where that is refused. Beyond 48 the solve
-/// misses too often: on the 311 islands of 60 rows or more that the
-/// 1000-body pour solved between 1.4 s and 1.5 s (82-body islands of 1400
-/// rows among them), taking them cost 4.05 s instead of 3.32 s, with 76
-/// islands missed instead of 26 (the block solves' residuals near the
-/// answer, where G spans many orders of magnitude, need GMRES there).
-const MAX_BODIES: usize = 48;
+/// in the bodies' contact graph (`block_lu`), six unknowns a body, so an
+/// 82-body pile island of 1400 rows costs about what its rows do.
+const MAX_BODIES: usize = 1000;
+/// Moving bodies at most for which a Newton system whose block solve is
+/// refused is factored densely (with pivoting); beyond, such a system ends
+/// the solve (a dense LU of 500 unknowns costs 10⁸ flops a step).
+const DENSE_BODIES: usize = 48;
 /// Added to the Newton matrix's diagonal, times A_ii, and nowhere else:
 /// it damps the steps along what the rows leave undetermined (the friction
 /// of redundant corners, free between its bounds with w ≈ 0, swung from
@@ -52,12 +51,20 @@ const DAMPING: f64 = 3e-9;
 /// Fraction of the way to the nearest bound a step may go.
 const TO_BOUND: f64 = 0.995;
 /// Newton steps from the first close enough to try the finish after
-/// which the solve stops (and its answer starts Dantzig's method).
-const FINISH_ATTEMPTS: usize = 10;
+/// which the solve stops (and the caller solves as before). A large
+/// island's iterates keep closing in for 20 steps and more (an 82-body
+/// island of 1362 rows: 1e-5, 5e-6, 2e-6 … 8e-8 m/s off the conditions
+/// in its first ten tries): on the 311 islands of the 1000-body pour's
+/// 1.4–1.5 s, 10 tries (and `POLISH_FROM` 3) left 73 islands beyond
+/// 1e-8 m/s in 3.9 s, 25 (and 15) 34 in 2.85 s.
+const FINISH_ATTEMPTS: usize = 25;
 /// Newton steps after which a solve not yet close to the answer stops.
 const FAR_STEPS: usize = 30;
-/// Attempts from which the finish also solves the free rows exactly.
-const POLISH_FROM: usize = 3;
+/// Attempts from which the finish also solves the free rows exactly (the
+/// subspace step: a sparse factorisation of the free rows, most of the
+/// finish's cost; the Newton steps get there by themselves as often: from
+/// 3, 8 or 15 the same islands met, in 3.49, 3.10 and 2.86 s).
+const POLISH_FROM: usize = 15;
 
 /// A row's part in the complementarity.
 #[derive(Clone, Copy)]
@@ -375,6 +382,12 @@ pub(super) fn takes(rows: &[Row], bodies: usize) -> bool {
     moving_bodies(rows, bodies).1 <= MAX_BODIES
 }
 
+/// Whether a system of these rows is large for the interior point: more
+/// moving bodies than a Newton step is cheap for (`DENSE_BODIES`).
+pub(super) fn is_large(rows: &[Row], bodies: usize) -> bool {
+    moving_bodies(rows, bodies).1 > DENSE_BODIES
+}
+
 fn max_diag(system: &IterativeSystem) -> f64 {
     system.diag.iter().fold(1e-300f64, |a, &d| a.max(d))
 }
@@ -473,7 +486,7 @@ impl<'m> Factor<'m> {
     }
 
     fn dense(k: &BlockMatrix, moving: usize) -> Option<Self> {
-        (moving <= MAX_BODIES).then(|| Factor::Dense(k.to_dense().partial_piv_lu()))
+        (moving <= DENSE_BODIES).then(|| Factor::Dense(k.to_dense().partial_piv_lu()))
     }
 
     /// Δu with K Δu = rhs; a block solve whose residual is refused turns
