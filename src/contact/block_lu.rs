@@ -120,7 +120,7 @@ impl BlockPattern {
 }
 
 /// A block matrix on a pattern: the identity to begin with, contacts'
-/// blocks added with `add`.
+/// blocks added through `block_mut`.
 pub(super) struct BlockMatrix<'p> {
     pattern: &'p BlockPattern,
     blocks: Vec<Block>,
@@ -138,8 +138,13 @@ impl<'p> BlockMatrix<'p> {
         BlockMatrix { pattern, blocks }
     }
 
-    /// Adds `value` at (row `r`, column `c`) of the block of body slots
-    /// (`a`, `b`).
+    /// How many bodies (six unknowns each) the matrix couples.
+    pub(super) fn bodies(&self) -> usize {
+        self.pattern.order.len()
+    }
+
+    /// The block of body slots (`a` row, `b` column), to add a contact's
+    /// part to.
     pub(super) fn block_mut(&mut self, a: usize, b: usize) -> &mut Block {
         let k = self
             .pattern
@@ -178,12 +183,14 @@ impl<'p> BlockMatrix<'p> {
             let d = p.at(k, k).expect("diagonal block");
             let inverse = invert(&lu[d])?;
             pivot_inverse.push(inverse);
-            let below: Vec<usize> = p.columns[k].iter().copied().filter(|&i| i > k).collect();
-            for &i in &below {
+            // Row k's columns are ascending: those after k, and by the
+            // pattern's symmetry the rows below k in column k.
+            let below = &p.columns[k][p.columns[k].partition_point(|&i| i <= k)..];
+            for &i in below {
                 let ik = p.at(i, k).expect("symmetric pattern");
                 let l = multiply(&lu[ik], &inverse);
                 lu[ik] = l;
-                for &j in &below {
+                for &j in below {
                     let kj = p.at(k, j).expect("symmetric pattern");
                     let ij = p.at(i, j).expect("fill holds the clique");
                     let u = lu[kj];

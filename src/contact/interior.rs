@@ -114,7 +114,7 @@ pub(super) fn solve(
         })
         .collect();
     let (slot, moving) = moving_bodies(rows, bodies);
-    if moving > MAX_BODIES {
+    if !takes(moving) {
         return None;
     }
     let n = 6 * moving;
@@ -223,7 +223,7 @@ pub(super) fn solve(
             }
         }
         let k = newton_matrix(&pattern, rows, &kind, &slot, &g, &e);
-        let mut factor = Factor::of(&k, moving)?;
+        let mut factor = Factor::of(&k)?;
         let mut solve_for = |r: &[f64]| -> Option<Vec<f64>> {
             // t = G⁻¹ r
             let t = ginv(&kind, &g, &e, r);
@@ -242,7 +242,7 @@ pub(super) fn solve(
                     }
                 }
             }
-            let du = factor.solve(&k, moving, &rhs)?;
+            let du = factor.solve(&k, &rhs)?;
             let mut dv = vec![Vector3::zeros(); bodies];
             let mut dw = vec![Vector3::zeros(); bodies];
             for b in 0..bodies {
@@ -377,15 +377,21 @@ fn moving_bodies(rows: &[Row], bodies: usize) -> (Vec<usize>, usize) {
     (slot, moving)
 }
 
-/// Whether `solve` takes a system of these rows (`MAX_BODIES`).
-pub(super) fn takes(rows: &[Row], bodies: usize) -> bool {
-    moving_bodies(rows, bodies).1 <= MAX_BODIES
+/// How many bodies the rows move (the Newton systems' six unknowns each).
+pub(super) fn moving_count(rows: &[Row], bodies: usize) -> usize {
+    moving_bodies(rows, bodies).1
 }
 
-/// Whether a system of these rows is large for the interior point: more
-/// moving bodies than a Newton step is cheap for (`DENSE_BODIES`).
-pub(super) fn is_large(rows: &[Row], bodies: usize) -> bool {
-    moving_bodies(rows, bodies).1 > DENSE_BODIES
+/// Whether `solve` takes a system that moves this many bodies
+/// (`MAX_BODIES`).
+pub(super) fn takes(moving: usize) -> bool {
+    moving <= MAX_BODIES
+}
+
+/// Whether a system that moves this many bodies is large for the interior
+/// point: more than a Newton step is cheap for (`DENSE_BODIES`).
+pub(super) fn is_large(moving: usize) -> bool {
+    moving > DENSE_BODIES
 }
 
 fn max_diag(system: &IterativeSystem) -> f64 {
@@ -478,25 +484,25 @@ enum Factor<'m> {
 }
 
 impl<'m> Factor<'m> {
-    fn of(k: &'m BlockMatrix, moving: usize) -> Option<Self> {
+    fn of(k: &'m BlockMatrix) -> Option<Self> {
         match k.factor() {
             Some(lu) => Some(Factor::Blocks(lu)),
-            None => Self::dense(k, moving),
+            None => Self::dense(k),
         }
     }
 
-    fn dense(k: &BlockMatrix, moving: usize) -> Option<Self> {
-        (moving <= DENSE_BODIES).then(|| Factor::Dense(k.to_dense().partial_piv_lu()))
+    fn dense(k: &BlockMatrix) -> Option<Self> {
+        (k.bodies() <= DENSE_BODIES).then(|| Factor::Dense(k.to_dense().partial_piv_lu()))
     }
 
     /// Δu with K Δu = rhs; a block solve whose residual is refused turns
     /// this factor dense.
-    fn solve(&mut self, k: &'m BlockMatrix, moving: usize, rhs: &[f64]) -> Option<Vec<f64>> {
+    fn solve(&mut self, k: &'m BlockMatrix, rhs: &[f64]) -> Option<Vec<f64>> {
         if let Factor::Blocks(lu) = self {
             if let Some(x) = lu.solve(rhs) {
                 return Some(x);
             }
-            *self = Self::dense(k, moving)?;
+            *self = Self::dense(k)?;
         }
         let Factor::Dense(lu) = self else {
             unreachable!("a block factor returned above")

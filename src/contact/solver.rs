@@ -790,17 +790,20 @@ fn solve_phase(
         let sum = normal_sum(&p);
         (p, sum)
     };
-    if m >= INTERIOR_MIN_ROWS
+    // The bodies the interior point's Newton systems would move, counted
+    // once (where it may be tried at all).
+    let interior_moving = (m >= INTERIOR_MIN_ROWS
         && task.iterative_min_rows != u32::MAX
-        && (iterative || !warm_is_close)
-        && super::interior::takes(&rows, v.len())
-    {
+        && (iterative || !warm_is_close))
+        .then(|| super::interior::moving_count(&rows, v.len()))
+        .filter(|&moving| super::interior::takes(moving));
+    if let Some(moving) = interior_moving {
         // A system at rest (a stack) meets the conditions in the warm
         // start's subspace step, a stack's impact in a few sweeps; a
         // large one's Newton steps cost more than its sweeps
         // (`SWEEPS_BEFORE_LARGE_INTERIOR`).
         if iterative {
-            let sweeps = if super::interior::is_large(&rows, v.len()) {
+            let sweeps = if super::interior::is_large(moving) {
                 SWEEPS_BEFORE_LARGE_INTERIOR
             } else {
                 ITERATIVE_CHECK_EVERY
