@@ -332,20 +332,26 @@ impl BlockLu<'_> {
         }
     }
 
+    /// Each term K_ij,ac · v_j,c of block row `i` of K v with the original
+    /// blocks (elimination order), in a fixed order, with its entry `a`.
+    fn row_terms(&self, i: usize, v: &[[f64; 6]], mut each: impl FnMut(usize, f64)) {
+        let p = self.pattern;
+        for (t, &j) in p.columns[i].iter().enumerate() {
+            let k = &self.original[p.start[i] + t];
+            for a in 0..6 {
+                for c in 0..6 {
+                    each(a, k[6 * a + c] * v[j][c]);
+                }
+            }
+        }
+    }
+
     /// K v with the original blocks (elimination order).
     fn multiply(&self, v: &[[f64; 6]]) -> Vec<[f64; 6]> {
-        let p = self.pattern;
         (0..v.len())
             .map(|i| {
                 let mut out = [0.0; 6];
-                for (t, &j) in p.columns[i].iter().enumerate() {
-                    let k = &self.original[p.start[i] + t];
-                    for a in 0..6 {
-                        for c in 0..6 {
-                            out[a] += k[6 * a + c] * v[j][c];
-                        }
-                    }
-                }
+                self.row_terms(i, v, |a, term| out[a] += term);
                 out
             })
             .collect()
@@ -381,23 +387,16 @@ impl BlockLu<'_> {
     /// b − K x, its largest entry, and the largest sum of the sizes of the
     /// terms an entry adds up (what rounding is measured against).
     fn residual(&self, b: &[[f64; 6]], x: &[[f64; 6]]) -> (Vec<[f64; 6]>, f64, f64) {
-        let p = self.pattern;
         let mut worst = 0.0f64;
         let mut scale = 0.0f64;
         let r = (0..b.len())
             .map(|i| {
                 let mut r = b[i];
                 let mut size: [f64; 6] = std::array::from_fn(|a| b[i][a].abs());
-                for (t, &j) in p.columns[i].iter().enumerate() {
-                    let k = &self.original[p.start[i] + t];
-                    for a in 0..6 {
-                        for c in 0..6 {
-                            let term = k[6 * a + c] * x[j][c];
-                            r[a] -= term;
-                            size[a] += term.abs();
-                        }
-                    }
-                }
+                self.row_terms(i, x, |a, term| {
+                    r[a] -= term;
+                    size[a] += term.abs();
+                });
                 for a in 0..6 {
                     worst = worst.max(r[a].abs());
                     scale = scale.max(size[a]);
