@@ -147,6 +147,7 @@ fn parse_slow(s: &str) -> Result<(i32, f64), String> {
 }
 
 fn main() -> ExitCode {
+    no_transparent_huge_pages();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -168,6 +169,23 @@ fn main() -> ExitCode {
             let _ = e.print();
             ExitCode::from(2)
         }
+    }
+}
+
+/// Turns transparent huge pages off for this process (what mimalloc's
+/// `MIMALLOC_ALLOW_THP=0` does), before the step allocates. mimalloc asks
+/// for huge pages on its arenas and returns freed pages to the system
+/// after a delay; each later touch of such memory then had the kernel zero
+/// a whole 2 MiB page: 6-10 % of a pour's samples were `clear_page_erms`
+/// under a page fault from `mi_page_fresh_alloc`, on every rank
+/// (`docs/benchmarks.md`, *Allocation*). With 4 KiB pages only what is
+/// touched is zeroed. A kernel without the switch keeps its default.
+fn no_transparent_huge_pages() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: PR_SET_THP_DISABLE takes no pointers; it sets a flag of this
+    // process's memory map, read by the kernel at each page fault.
+    unsafe {
+        libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0);
     }
 }
 
