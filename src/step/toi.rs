@@ -350,7 +350,7 @@ impl Region<'_> {
                 };
             }
             let (sa, sb) = self.states_at(a, b, seg, t);
-            let (r, task) = self.sample_states(a, b, &sa, &sb);
+            let (r, task, far) = self.sample_states(a, b, &sa, &sb);
             if self.overlaps_more((a, b), &r, t, seg, since) {
                 return Sampled::Between {
                     lo: prev,
@@ -362,7 +362,10 @@ impl Region<'_> {
             // A lower bound on the gap: V-Clip's distance over the part pairs
             // it tested, and for the others the gap between their part
             // spheres.
-            let gap = gap_bound(self.st.objects, &r, &task);
+            let gap = match far {
+                Some(far) if !r.penetrating => r.distance.min(far).max(0.0),
+                _ => gap_bound(self.st.objects, &r, &task),
+            };
             // Axes to try: the closest points' line, the contact normal where
             // they touch, and the centres' line.
             let axes = [
@@ -552,8 +555,8 @@ impl Region<'_> {
         let (sa, sb) = self.states_at(a, b, seg, t);
         self.counters.toi_bisection_queries += 1;
         let task = self.pair_task(a as u32, b as u32, &sa, &sb);
-        let gap = narrowphase::overlap_probe(self.st.objects, &task)?;
-        let far = narrowphase::far_part_gap(self.st.objects, &task);
+        let (probe, far) = narrowphase::probe_apart_and_far_gap(self.st.objects, &task);
+        let (gap, _) = probe?;
         Some((gap, gap.min(far).max(0.0)))
     }
 
@@ -586,26 +589,31 @@ impl Region<'_> {
     /// only with them, `overlaps_more`), so only then the full query. The
     /// same answer as `query_states` for every use a sample has, at a
     /// fraction of the cost on many-faced bodies (the separating-axis
-    /// search behind contact points).
+    /// search behind contact points). With the probe's answer comes the
+    /// far part pairs' sphere gap (`gap_bound`'s other half, from the same
+    /// pass over the part pairs); `None` where the full query answered.
     fn sample_states(
         &mut self,
         a: usize,
         b: usize,
         sa: &BodyState,
         sb: &BodyState,
-    ) -> (PairResult, PairTask) {
+    ) -> (PairResult, PairTask, Option<f64>) {
         let task = self.pair_task(a as u32, b as u32, sa, sb);
-        match narrowphase::probe_apart(self.st.objects, &task) {
-            Some((gap, axis)) if gap > CONTACT_TOLERANCE => {
+        match narrowphase::probe_apart_and_far_gap(self.st.objects, &task) {
+            (Some((gap, axis)), far) if gap > CONTACT_TOLERANCE => {
                 self.counters.toi_bisection_queries += 1;
                 let r = PairResult {
                     distance: gap,
                     closest_axis: axis,
                     ..Default::default()
                 };
-                (r, task)
+                (r, task, Some(far))
             }
-            _ => self.query_states(a, b, sa, sb),
+            _ => {
+                let (r, task) = self.query_states(a, b, sa, sb);
+                (r, task, None)
+            }
         }
     }
 
