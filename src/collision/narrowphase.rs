@@ -239,7 +239,7 @@ pub fn probe_apart_and_far_gap(
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
     );
-    let scan = scan_parts(oa, ob, task);
+    let scan = scan_parts(oa, ob, task, true);
     let warm = WarmStarts::of(task);
     let (mut gap, mut axis) = (f64::INFINITY, Vector3::zeros());
     for pair in scan.close {
@@ -262,35 +262,53 @@ struct PartScan {
     far_gap: f64,
 }
 
-/// `close_part_pairs` and `part_sphere_gap(…, task.contact_tolerance)` in
-/// one loop: a part pair's squared centre distance serves both (nalgebra's
-/// `norm` is the square root of `norm_squared`), and an A part that
-/// `part_sphere_gap` skips (too far from all of B to lower its gap) is
-/// still scanned for close pairs.
-fn scan_parts(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask) -> PartScan {
-    let centres_b: Vec<Point3<f64>> = ob
-        .parts
-        .iter()
-        .map(|pb| task.pose_b * Point3::from(pb.sphere.center))
-        .collect();
-    let reach_b = ob
-        .parts
-        .iter()
-        .map(|pb| pb.sphere.center.norm() + pb.sphere.radius)
-        .fold(0.0, f64::max);
-    let origin_b = Point3::from(task.pose_b.translation.vector);
+/// B's part spheres' centres placed by the task's pose, B's origin there,
+/// and the radius about it that holds every one of those spheres.
+struct PlacedSpheres {
+    centres: Vec<Point3<f64>>,
+    origin: Point3<f64>,
+    reach: f64,
+}
+
+impl PlacedSpheres {
+    fn of(ob: &ObjectDef, task: &PairTask) -> Self {
+        PlacedSpheres {
+            centres: ob
+                .parts
+                .iter()
+                .map(|pb| task.pose_b * Point3::from(pb.sphere.center))
+                .collect(),
+            origin: Point3::from(task.pose_b.translation.vector),
+            reach: ob
+                .parts
+                .iter()
+                .map(|pb| pb.sphere.center.norm() + pb.sphere.radius)
+                .fold(0.0, f64::max),
+        }
+    }
+}
+
+/// The part pairs whose spheres come within the contact tolerance and,
+/// with `far_gap`, the same loop as `part_sphere_gap(…,
+/// task.contact_tolerance)` for the others (+∞ without): a part pair's
+/// squared centre distance serves both (nalgebra's `norm` is the square
+/// root of `norm_squared`). An A part too far from all of B to lower the
+/// gap (`part_sphere_gap`'s skip) is still scanned for close pairs, unless
+/// it is further than the tolerance (plus `CLOSE_MARGIN`) from them all.
+fn scan_parts(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask, far_gap: bool) -> PartScan {
+    let b = PlacedSpheres::of(ob, task);
     let beyond = task.contact_tolerance;
     let mut close = Vec::new();
-    let mut far_gap = f64::INFINITY;
+    let mut gap = f64::INFINITY;
     for (ia, pa) in oa.parts.iter().enumerate() {
         let ca = task.pose_a * Point3::from(pa.sphere.center);
-        let nearest = (ca - origin_b).norm() - pa.sphere.radius - reach_b;
-        let gap_skips = nearest >= far_gap;
+        let nearest = (ca - b.origin).norm() - pa.sphere.radius - b.reach;
+        let gap_skips = !far_gap || nearest >= gap;
         let none_close = nearest > task.contact_tolerance + CLOSE_MARGIN;
         if gap_skips && none_close {
             continue;
         }
-        for (ib, (pb, cb)) in ob.parts.iter().zip(&centres_b).enumerate() {
+        for (ib, (pb, cb)) in ob.parts.iter().zip(&b.centres).enumerate() {
             let d2 = (ca - cb).norm_squared();
             let reach = pa.sphere.radius + pb.sphere.radius + task.contact_tolerance;
             if !none_close && d2 <= reach * reach {
@@ -299,12 +317,15 @@ fn scan_parts(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask) -> PartScan {
             if !gap_skips {
                 let g = d2.sqrt() - pa.sphere.radius - pb.sphere.radius;
                 if g > beyond {
-                    far_gap = far_gap.min(g);
+                    gap = gap.min(g);
                 }
             }
         }
     }
-    PartScan { close, far_gap }
+    PartScan {
+        close,
+        far_gap: gap,
+    }
 }
 
 /// A lower bound on the gap between the part pairs that `query_pair` and
@@ -325,27 +346,17 @@ pub fn part_sphere_gap(objects: &[ObjectDef], task: &PairTask, beyond: f64) -> f
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
     );
-    let centres_b: Vec<Point3<f64>> = ob
-        .parts
-        .iter()
-        .map(|pb| task.pose_b * Point3::from(pb.sphere.center))
-        .collect();
-    // B's part spheres all lie within `reach_b` of B's origin: a part of A
+    // B's part spheres all lie within `b.reach` of B's origin: a part of A
     // that far from all of them already is skipped whole.
-    let reach_b = ob
-        .parts
-        .iter()
-        .map(|pb| pb.sphere.center.norm() + pb.sphere.radius)
-        .fold(0.0, f64::max);
-    let origin_b = Point3::from(task.pose_b.translation.vector);
+    let b = PlacedSpheres::of(ob, task);
     let mut gap = f64::INFINITY;
     for pa in &oa.parts {
         let ca = task.pose_a * Point3::from(pa.sphere.center);
-        let nearest = (ca - origin_b).norm() - pa.sphere.radius - reach_b;
+        let nearest = (ca - b.origin).norm() - pa.sphere.radius - b.reach;
         if nearest >= gap {
             continue;
         }
-        for (pb, cb) in ob.parts.iter().zip(&centres_b) {
+        for (pb, cb) in ob.parts.iter().zip(&b.centres) {
             let g = (ca - cb).norm() - pa.sphere.radius - pb.sphere.radius;
             if g > beyond {
                 gap = gap.min(g);
@@ -364,33 +375,7 @@ const CLOSE_MARGIN: f64 = 1e-9;
 
 /// Part pairs whose part spheres come within the contact tolerance.
 fn close_part_pairs(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask) -> Vec<(usize, usize)> {
-    let centres_b: Vec<Point3<f64>> = ob
-        .parts
-        .iter()
-        .map(|pb| task.pose_b * Point3::from(pb.sphere.center))
-        .collect();
-    let reach_b = ob
-        .parts
-        .iter()
-        .map(|pb| pb.sphere.center.norm() + pb.sphere.radius)
-        .fold(0.0, f64::max);
-    let origin_b = Point3::from(task.pose_b.translation.vector);
-    let mut close = Vec::new();
-    for (ia, pa) in oa.parts.iter().enumerate() {
-        let ca = task.pose_a * Point3::from(pa.sphere.center);
-        if (ca - origin_b).norm() - pa.sphere.radius - reach_b
-            > task.contact_tolerance + CLOSE_MARGIN
-        {
-            continue;
-        }
-        for (ib, (pb, cb)) in ob.parts.iter().zip(&centres_b).enumerate() {
-            let reach = pa.sphere.radius + pb.sphere.radius + task.contact_tolerance;
-            if (ca - cb).norm_squared() <= reach * reach {
-                close.push((ia, ib));
-            }
-        }
-    }
-    close
+    scan_parts(oa, ob, task, false).close
 }
 
 /// A task's cached features, looked up by part pair. `query_pair` writes
