@@ -183,9 +183,13 @@ fn main() -> ExitCode {
 fn no_transparent_huge_pages() {
     #[cfg(target_os = "linux")]
     // SAFETY: PR_SET_THP_DISABLE takes no pointers; it sets a flag of this
-    // process's memory map, read by the kernel at each page fault.
+    // process's memory map, read by the kernel at each page fault. prctl is
+    // variadic and the kernel reads its arguments as unsigned longs (and
+    // refuses the call unless the last three are 0), so they are passed at
+    // that width.
     unsafe {
-        libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0);
+        let (on, unused): (libc::c_ulong, libc::c_ulong) = (1, 0);
+        libc::prctl(libc::PR_SET_THP_DISABLE, on, unused, unused, unused);
     }
 }
 
