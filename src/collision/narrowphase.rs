@@ -195,42 +195,15 @@ fn highest_along(object: &ObjectDef, d: &Vector3<f64>) -> f64 {
     high
 }
 
-/// V-Clip alone: `None` when a part pair overlaps, else the smallest gap
-/// over the close part pairs (+∞ when none is close).
-pub fn overlap_probe(objects: &[ObjectDef], task: &PairTask) -> Option<f64> {
-    probe_apart(objects, task).map(|(gap, _)| gap)
-}
-
-/// `overlap_probe` with the closest part pair's axis, as `query_pair`
-/// gives them (`PairResult::closest_axis`): the same V-Clip walks from the
-/// same warm starts, without contact points.
-pub fn probe_apart(objects: &[ObjectDef], task: &PairTask) -> Option<(f64, Vector3<f64>)> {
-    let (oa, ob) = (
-        &objects[task.object_a as usize],
-        &objects[task.object_b as usize],
-    );
-    let warm = WarmStarts::of(task);
-    let (mut gap, mut axis) = (f64::INFINITY, Vector3::zeros());
-    for pair in close_part_pairs(oa, ob, task) {
-        let prox = part_proximity(oa, ob, task, &warm, pair);
-        if prox.penetrating {
-            return None;
-        }
-        if prox.distance < gap {
-            gap = prox.distance;
-            axis = prox.point_a - prox.point_b;
-        }
-    }
-    Some((gap, axis))
-}
-
-/// `probe_apart` and `far_part_gap` of one task in one pass over its part
-/// pairs: the time-of-impact search asks both of every sample, and the two
-/// passes (each part sphere's centre placed, every part pair's distance)
-/// were a tenth of a pour's first second. The same pairs in the same
-/// order, the same arithmetic and the same skips as the two functions, so
-/// the same answers to the bit: the probe (`None` where a part pair
-/// overlaps) and the far part pairs' sphere gap.
+/// V-Clip alone on the close part pairs, without contact points: `None`
+/// when a part pair overlaps, else the smallest gap over them (+∞ when none
+/// is close) with the closest part pair's axis, as `query_pair` gives them
+/// (`PairResult::closest_axis`: the same V-Clip walks from the same warm
+/// starts). Beside it, the far part pairs' sphere gap (`far_part_gap`) from
+/// the same pass over the part pairs (`scan_parts`): the time-of-impact
+/// search asks both of every sample, and two passes (each part sphere's
+/// centre placed, every part pair's distance) were a tenth of a pour's
+/// first second.
 pub fn probe_apart_and_far_gap(
     objects: &[ObjectDef],
     task: &PairTask,
@@ -329,7 +302,7 @@ fn scan_parts(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask, far_gap: bool) ->
 }
 
 /// A lower bound on the gap between the part pairs that `query_pair` and
-/// `overlap_probe` do not test (their part spheres are further apart than
+/// `probe_apart_and_far_gap` do not test (their part spheres are further apart than
 /// the contact tolerance): the smallest gap between such part spheres; +∞
 /// when every part pair is close. With the V-Clip distance of the close
 /// pairs it bounds the bodies' distance from below far more tightly than

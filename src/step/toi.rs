@@ -310,7 +310,7 @@ impl Region<'_> {
             let task = self.pair_task(a as u32, b as u32, ea, eb);
             let tested = end.part_pairs_tested > 0;
             let gap = if tested {
-                gap_bound(self.st.objects, end, &task)
+                gap_bound(self.st.objects, end, &task, None)
             } else {
                 narrowphase::part_sphere_gap(self.st.objects, &task, f64::NEG_INFINITY).max(0.0)
             };
@@ -362,10 +362,7 @@ impl Region<'_> {
             // A lower bound on the gap: V-Clip's distance over the part pairs
             // it tested, and for the others the gap between their part
             // spheres.
-            let gap = match far {
-                Some(far) if !r.penetrating => r.distance.min(far).max(0.0),
-                _ => gap_bound(self.st.objects, &r, &task),
-            };
+            let gap = gap_bound(self.st.objects, &r, &task, far);
             // Axes to try: the closest points' line, the contact normal where
             // they touch, and the centres' line.
             let axes = [
@@ -557,7 +554,11 @@ impl Region<'_> {
         let task = self.pair_task(a as u32, b as u32, &sa, &sb);
         let (probe, far) = narrowphase::probe_apart_and_far_gap(self.st.objects, &task);
         let (gap, _) = probe?;
-        Some((gap, gap.min(far).max(0.0)))
+        let r = PairResult {
+            distance: gap,
+            ..Default::default()
+        };
+        Some((gap, gap_bound(self.st.objects, &r, &task, Some(far))))
     }
 
     /// The pair at time `t`, with contact points (their depth tells an
@@ -963,13 +964,14 @@ impl Region<'_> {
 
 /// A lower bound on the distance of a pair at the instant of its result
 /// `r` (query `task`): V-Clip's distance over the part pairs it tested and
-/// the part spheres' gap for the others; 0 where it overlaps.
-fn gap_bound(objects: &[ObjectDef], r: &PairResult, task: &PairTask) -> f64 {
+/// the part spheres' gap for the others (`far`, where the same pass that
+/// probed the pair found it already; `narrowphase::far_part_gap`
+/// otherwise); 0 where it overlaps.
+fn gap_bound(objects: &[ObjectDef], r: &PairResult, task: &PairTask, far: Option<f64>) -> f64 {
     if r.penetrating {
         0.0
     } else {
-        r.distance
-            .min(narrowphase::far_part_gap(objects, task))
-            .max(0.0)
+        let far = far.unwrap_or_else(|| narrowphase::far_part_gap(objects, task));
+        r.distance.min(far).max(0.0)
     }
 }
