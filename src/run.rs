@@ -6,7 +6,7 @@ use crate::body::{Activity, BodyKind};
 use crate::output::checkpoint::{self, Checkpoint, RunMarks};
 use crate::output::progress::Progress;
 use crate::output::summary::{self, RankHost, RankLine, RankSummary, Summary};
-use crate::output::trajectory::{Continued, TrajectoryWriter};
+use crate::output::trajectory::{Continued, Marking, TrajectoryWriter};
 use crate::output::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::render;
 use crate::scene::Scene;
@@ -479,12 +479,19 @@ pub fn run_coordinator(
     let (scene_path, scene_digest) = summary::scene_file_identity(&scene.path);
     // The last good checkpoint: the one resumed from, then each one written.
     let mut last_good: Option<(PathBuf, f64)> = None;
+    // Checkpoints keep the trajectory's hash; without them it is not kept.
+    let marking = if opts.checkpoint_every.is_some() {
+        Marking::Hashed
+    } else {
+        Marking::Counted
+    };
     let (mut world, marks, mut traj, continued) = match resume {
         None => {
             let mut world = World::new(scene);
             world.sleep_enabled = !opts.no_sleep;
             world.split_groups = opts.split_groups;
-            let traj = TrajectoryWriter::create(&traj_path).map_err(|e| io(e, "trajectory.csv"))?;
+            let traj = TrajectoryWriter::create(&traj_path, marking)
+                .map_err(|e| io(e, "trajectory.csv"))?;
             (world, None, traj, Continued::New)
         }
         Some(ck) => {
@@ -498,8 +505,9 @@ pub fn run_coordinator(
             last_good = Some((ck.source().to_path_buf(), time));
             let mut world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
             world.split_groups = opts.split_groups;
-            let (traj, continued) = TrajectoryWriter::resume(&traj_path, marks.trajectory, time)
-                .map_err(|e| io(e, &traj_path.display().to_string()))?;
+            let (traj, continued) =
+                TrajectoryWriter::resume(&traj_path, marks.trajectory, time, marking)
+                    .map_err(|e| io(e, &traj_path.display().to_string()))?;
             (world, Some(marks), traj, continued)
         }
     };

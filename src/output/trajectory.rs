@@ -32,6 +32,20 @@ pub struct TrajectoryWriter {
     last_time: Option<f64>,
     /// What the file held at the last `flush`.
     mark: TrajectoryMark,
+    /// Whether the mark's hash is kept (`Marking`).
+    marking: Marking,
+}
+
+/// Whether a writer hashes what it writes, for the checkpoints' marks.
+/// FNV-1a goes byte by byte, a quarter of the writer thread's time (10 MB
+/// for the 200-body pour's 2 s), and the thread shares the cores with the
+/// ranks: a run that writes no checkpoint counts the bytes only.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Marking {
+    /// Bytes and hash: `mark` answers.
+    Hashed,
+    /// Bytes only: `mark` must not be asked.
+    Counted,
 }
 
 /// Work for the writer thread.
@@ -49,12 +63,16 @@ const SAMPLES_IN_FLIGHT: usize = 64;
 struct RowWriter {
     out: BufWriter<std::fs::File>,
     mark: TrajectoryMark,
+    marking: Marking,
 }
 
 impl RowWriter {
     fn write(&mut self, bytes: &[u8]) -> std::io::Result<()> {
         self.out.write_all(bytes)?;
-        self.mark.add(bytes);
+        match self.marking {
+            Marking::Hashed => self.mark.add(bytes),
+            Marking::Counted => self.mark.bytes += bytes.len() as u64,
+        }
         Ok(())
     }
 
@@ -154,10 +172,11 @@ pub enum Continued {
 }
 
 impl TrajectoryWriter {
-    pub fn create(path: &Path) -> std::io::Result<Self> {
+    pub fn create(path: &Path, marking: Marking) -> std::io::Result<Self> {
         let mut out = RowWriter {
             out: BufWriter::new(std::fs::File::create(path)?),
             mark: TrajectoryMark::start(),
+            marking,
         };
         out.write(format!("{HEADER}\n").as_bytes())?;
         Ok(Self::start(out, None))
@@ -168,7 +187,7 @@ impl TrajectoryWriter {
         let (rows, jobs) = mpsc::sync_channel(SAMPLES_IN_FLIGHT);
         let (flushed_tx, flushed) = mpsc::sync_channel(1);
         let failed = Arc::new(Mutex::new(None));
-        let mark = out.mark;
+        let (mark, marking) = (out.mark, out.marking);
         let shared = Arc::clone(&failed);
         let thread = std::thread::Builder::new()
             .name("trajectory".into())
@@ -184,6 +203,7 @@ impl TrajectoryWriter {
             thread: Some(thread),
             last_time,
             mark,
+            marking,
         }
     }
 
@@ -199,13 +219,14 @@ impl TrajectoryWriter {
         path: &Path,
         mark: TrajectoryMark,
         time: f64,
+        marking: Marking,
     ) -> std::io::Result<(Self, Continued)> {
         let Ok(file) = std::fs::OpenOptions::new()
             .read(true)
             .write(true)
             .open(path)
         else {
-            return Ok((Self::create(path)?, Continued::New));
+            return Ok((Self::create(path, marking)?, Continued::New));
         };
         check_prefix(&file, mark)?;
         file.set_len(mark.bytes)?;
@@ -215,12 +236,19 @@ impl TrajectoryWriter {
         let out = RowWriter {
             out: BufWriter::new(file),
             mark,
+            marking,
         };
         Ok((Self::start(out, Some(time)), Continued::Kept))
     }
 
-    /// What the file held at the last `flush` (a checkpoint flushes first).
+    /// What the file held at the last `flush` (a checkpoint flushes
+    /// first), for a writer made with `Marking::Hashed`.
     pub fn mark(&self) -> TrajectoryMark {
+        assert_eq!(
+            self.marking,
+            Marking::Hashed,
+            "a checkpoint's mark from a writer that counts bytes only"
+        );
         self.mark
     }
 
