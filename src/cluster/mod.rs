@@ -219,13 +219,26 @@ impl<'p> Polled<'p> {
 }
 
 impl Executor for Polled<'_> {
+    // Task by task, polling between them: a group's first batch holds all
+    // its pairs (milliseconds for a pile), and a worker waiting for its
+    // next chunk would wait for all of it.
     fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
-        (self.poll)();
-        self.inline.narrowphase(objects, tasks)
+        tasks
+            .iter()
+            .map(|t| {
+                (self.poll)();
+                narrowphase::query_pair(objects, t)
+            })
+            .collect()
     }
     fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
-        (self.poll)();
-        self.inline.solve_islands(tasks)
+        tasks
+            .iter()
+            .map(|t| {
+                (self.poll)();
+                solver::solve_island(t)
+            })
+            .collect()
     }
     fn step_groups(
         &mut self,
@@ -244,6 +257,9 @@ impl Executor for Polled<'_> {
     ) -> Vec<PreparedPairs> {
         (self.poll)();
         self.inline.prepare_groups(st, params, inputs)
+    }
+    fn poll(&mut self) {
+        (self.poll)();
     }
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
         self.inline.finish()
@@ -659,10 +675,10 @@ impl<'w> MpiExecutor<'w> {
                 }
             };
         }
-        // Takes worker `k`'s answer to its oldest chunk.
+        // Takes worker `k`'s answer to `chunk`, its oldest.
         macro_rules! take_reply {
-            ($k:expr) => {{
-                let chunk = held[$k].pop_front().expect("a chunk is held");
+            ($k:expr, $chunk:expr) => {{
+                let chunk: Vec<usize> = $chunk;
                 let (rs, busy) = self.gather(slots[$k], &chunk, costs, &unpack);
                 total_busy += busy;
                 for (r, i) in rs.into_iter().zip(chunk) {
@@ -671,7 +687,8 @@ impl<'w> MpiExecutor<'w> {
             }};
         }
         // Takes every answer that has arrived and hands its worker the next
-        // chunk.
+        // chunk: posted first, so that the worker steps it while rank 0
+        // reads the answer.
         macro_rules! serve {
             () => {
                 for k in 0..slots.len() {
@@ -683,8 +700,9 @@ impl<'w> MpiExecutor<'w> {
                             .immediate_probe_with_tag(protocol::TAG_REPLY)
                             .is_some()
                     {
-                        take_reply!(k);
+                        let answered = held[k].pop_front().expect("a chunk is held");
                         refill!(k);
+                        take_reply!(k, answered);
                     }
                 }
             };
@@ -718,8 +736,8 @@ impl<'w> MpiExecutor<'w> {
         // Everything is handed out: gather what the workers still hold.
         let wait = Instant::now();
         for k in 0..slots.len() {
-            while !held[k].is_empty() {
-                take_reply!(k);
+            while let Some(chunk) = held[k].pop_front() {
+                take_reply!(k, chunk);
             }
         }
         self.reap_posts(&mut posted, true);
@@ -1145,7 +1163,7 @@ impl MpiExecutor<'_> {
 impl MpiExecutor<'_> {
     /// The first stage of each of these groups for all its pairs, before
     /// they are split (`Executor::prepare_groups`): on rank 0 alone, or
-    /// each group's pairs cut into a range per rank and self-scheduled,
+    /// each group's pairs cut into ranges (`prepared_cuts`) and self-scheduled,
     /// as for `prepare_large_groups`.
     fn prepare_groups_stage(
         &mut self,
@@ -1164,7 +1182,9 @@ impl MpiExecutor<'_> {
             let clock = Instant::now();
             let prepared: Vec<PreparedPairs> = inputs
                 .iter()
-                .map(|input| prepare_pairs(st, input, (0, input.pair_count())))
+                .map(|input| {
+                    prepare_pairs(st, input, (0, input.pair_count()), &mut Inline::default())
+                })
                 .collect();
             self.book[0].busy_s += clock.elapsed().as_secs_f64();
             self.book[0].tasks_np += prepared.iter().map(PreparedPairs::tasks).sum::<u64>();
@@ -1173,8 +1193,9 @@ impl MpiExecutor<'_> {
         let ranks = workers + 1;
         let jobs: Vec<(usize, usize, f64)> = (0..inputs.len())
             .map(|g| {
-                let cuts = if inputs[g].pair_count() >= ranks * MIN_PREPARED_PAIRS {
-                    ranks
+                let pairs = inputs[g].pair_count();
+                let cuts = if pairs >= ranks * MIN_PREPARED_PAIRS {
+                    prepared_cuts(pairs, ranks)
                 } else {
                     1
                 };
@@ -1201,8 +1222,11 @@ impl MpiExecutor<'_> {
         for &(g, cuts, cost) in jobs {
             let n = inputs[g].pair_count();
             for r in 0..cuts {
-                shares.push((g, (r * n / cuts, (r + 1) * n / cuts)));
-                share_costs.push(cost / cuts as f64);
+                let range = (r * n / cuts, (r + 1) * n / cuts);
+                if range.0 < range.1 {
+                    shares.push((g, range));
+                    share_costs.push(cost / cuts as f64);
+                }
             }
         }
         self.dist.groups_prepared += jobs.iter().filter(|&&(_, cuts, _)| cuts > 1).count() as u64;
@@ -1210,14 +1234,21 @@ impl MpiExecutor<'_> {
             workers,
             shares.clone(),
             &share_costs,
-            |share| Req::PreparePairs {
-                params: params.clone(),
-                shares: share
-                    .into_iter()
-                    .map(|(g, range)| (inputs[g].clone(), range))
-                    .collect(),
+            |share| {
+                // Each group's input once, however many of its ranges.
+                let mut groups: Vec<usize> = share.iter().map(|&(g, _)| g).collect();
+                groups.sort_unstable();
+                groups.dedup();
+                Req::PreparePairs {
+                    params: params.clone(),
+                    inputs: groups.iter().map(|&g| inputs[g].clone()).collect(),
+                    shares: share
+                        .into_iter()
+                        .map(|(g, range)| (groups.binary_search(&g).expect("listed") as u32, range))
+                        .collect(),
+                }
             },
-            |(g, range), _| prepare_pairs(st, &inputs[g], range),
+            |(g, range), poll| prepare_pairs(st, &inputs[g], range, &mut Polled::new(poll)),
             |reply| match reply {
                 Reply::PreparePairs { prepared, busy_s } => Some((prepared, busy_s)),
                 _ => None,
@@ -1238,7 +1269,7 @@ impl MpiExecutor<'_> {
     /// A group predicted to take more than its ranks' fair share cannot be
     /// balanced whole: the first stage of its step (each pair's end-of-step
     /// result and time of impact, `prepare_pairs`; about half of a pile's
-    /// step) goes out first, its pairs cut into a range per rank, and the
+    /// step) goes out first, its pairs cut into ranges (`prepared_cuts`), and the
     /// group then steps its events from those answers wherever it goes.
     /// Returns the inputs and their costs for the group steps that follow.
     fn prepare_large_groups(
@@ -1267,11 +1298,14 @@ impl MpiExecutor<'_> {
         if large.is_empty() {
             return (inputs, costs);
         }
-        // Each large group's pairs in a range per rank, costed by the first
+        // Each large group's pairs in ranges, costed by the first
         // stage's share of the group's predicted time.
         let jobs: Vec<(usize, usize, f64)> = large
             .iter()
-            .map(|&g| (g, ranks, costs[g] * FIRST_STAGE_SHARE))
+            .map(|&g| {
+                let cuts = prepared_cuts(inputs[g].pair_count(), ranks);
+                (g, cuts, costs[g] * FIRST_STAGE_SHARE)
+            })
             .collect();
         let prepared = self.prepare_in_ranges(st, params, workers, &inputs, &jobs);
         for (&g, p) in large.iter().zip(prepared) {
@@ -1288,6 +1322,21 @@ const FIRST_STAGE_SHARE: f64 = 0.45;
 /// A group's first stage is cut into ranges of at least this many pairs
 /// per rank (below, messages cost more than the share saves).
 const MIN_PREPARED_PAIRS: usize = 16;
+/// Ranges per rank a large group's first stage is cut into (of at least
+/// `MIN_PREPARED_PAIRS` / 2 pairs each), self-scheduled: the pairs' costs
+/// are far from even (on the 200-body pour's pile the second half of the
+/// pairs by body id took three times the first, the bodies dropped last
+/// still falling fast), so one equal range per rank left the ranks with
+/// the cheap ranges waiting.
+const PREPARED_CUTS_PER_RANK: usize = 4;
+
+/// How many ranges a group's first stage of `pairs` pairs is cut into,
+/// over `ranks` ranks (`PREPARED_CUTS_PER_RANK`).
+fn prepared_cuts(pairs: usize, ranks: usize) -> usize {
+    (ranks * PREPARED_CUTS_PER_RANK)
+        .min(pairs / (MIN_PREPARED_PAIRS / 2))
+        .max(ranks)
+}
 
 /// The stages whose messages are costed by their bytes (`schedule::Link`).
 #[derive(Clone, Copy, Debug)]
@@ -1590,11 +1639,17 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
                     busy_s: busy,
                 }
             }
-            Req::PreparePairs { params, shares } => {
+            Req::PreparePairs {
+                params,
+                inputs,
+                shares,
+            } => {
                 let st = params.statics(scene);
                 let prepared: Vec<PreparedPairs> = shares
                     .iter()
-                    .map(|(input, range)| prepare_pairs(&st, input, *range))
+                    .map(|&(i, range)| {
+                        prepare_pairs(&st, &inputs[i as usize], range, &mut Inline::default())
+                    })
                     .collect();
                 report.narrowphase_tasks += prepared.iter().map(PreparedPairs::tasks).sum::<u64>();
                 let busy = stall(slow, clock, cpu).as_secs_f64();

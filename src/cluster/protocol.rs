@@ -49,7 +49,10 @@ pub enum Request {
     /// pairs. The group then goes out whole with all its answers.
     PreparePairs {
         params: GroupParams,
-        shares: Vec<(GroupInput, (usize, usize))>,
+        /// The groups the ranges belong to, each once.
+        inputs: Vec<GroupInput>,
+        /// Per range: its group (an index into `inputs`) and its pairs.
+        shares: Vec<(u32, (usize, usize))>,
     },
     /// Start-up latency probe: the worker answers `Pong` at once.
     Ping,

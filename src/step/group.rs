@@ -24,12 +24,12 @@
 //! Repeated until nothing new meets, so every meeting is handled as if the
 //! group had been one from the start, whatever the number of ranks.
 
+use super::Executor;
 use super::contact::{SolvedTogether, SpinResolves, Touching, WarmContact};
 use super::impacts::step_group;
 use super::region::{PairKey, PairMap, Region, Segment, StepStatic};
 use super::stats::{Counters, NumericalFailure, StageSeconds};
 use super::toi::{Since, SolvedSince};
-use super::{Executor, Inline};
 use crate::body::Body;
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::{self, SphereProxy};
@@ -352,6 +352,7 @@ pub fn prepare_pairs(
     st: &StepStatic,
     input: &GroupInput,
     (from, to): (usize, usize),
+    exec: &mut dyn Executor,
 ) -> PreparedPairs {
     let clock = std::time::Instant::now();
     let pairs = &input.pairs[from..to];
@@ -377,14 +378,16 @@ pub fn prepare_pairs(
     };
     let separating: PairMap<Vector3<f64>> = input.separating.iter().cloned().collect();
     let since: SolvedSince = input.since.iter().cloned().collect();
-    let results =
-        g.narrowphase_skipping_separating(&mut Inline::default(), pairs, &input.end, &separating);
+    let results = g.narrowphase_skipping_separating(exec, pairs, &input.end, &separating);
     let toi_clock = std::time::Instant::now();
     let h = st.settings.dt;
     let toi = pairs
         .iter()
         .zip(&results)
-        .map(|(&k, r)| g.time_of_impact(k, r, &input.seg, h, &since))
+        .map(|(&k, r)| {
+            exec.poll();
+            g.time_of_impact(k, r, &input.seg, h, &since)
+        })
         .collect();
     g.stage.time_of_impact += toi_clock.elapsed().as_secs_f64();
     PreparedPairs {

@@ -171,11 +171,13 @@ impl PairBook {
         h: f64,
         since: &SolvedSince,
         accepted: &BTreeSet<PairKey>,
+        exec: &mut dyn Executor,
     ) -> Option<(PairKey, f64)> {
         for k in std::mem::take(&mut self.dirty) {
             if accepted.contains(&k) {
                 continue;
             }
+            exec.poll();
             let tau = g.time_of_impact(k, &self.results[&k], seg, h, since);
             self.toi.insert(k, tau);
             if let Some(t) = tau {
@@ -306,7 +308,7 @@ pub(crate) fn step_group(
             .collect::<Vec<_>>()
     };
     loop {
-        let violation = book.earliest(&mut g, &seg, h, &since, &accepted);
+        let violation = book.earliest(&mut g, &seg, h, &since, &accepted, exec);
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
         // rolls back and is solved as at an impact. Not before the
