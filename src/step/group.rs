@@ -347,7 +347,8 @@ impl PreparedPairs {
 }
 
 /// The first stage of group `input`'s step for its pairs `from..to`
-/// (`PreparedPairs`), on any rank.
+/// (`PreparedPairs`), on any rank; `exec` runs its narrowphase batch and
+/// is polled before each pair's time of impact (`Executor::poll`).
 pub fn prepare_pairs(
     st: &StepStatic,
     input: &GroupInput,
