@@ -1222,11 +1222,8 @@ impl MpiExecutor<'_> {
         for &(g, cuts, cost) in jobs {
             let n = inputs[g].pair_count();
             for r in 0..cuts {
-                let range = (r * n / cuts, (r + 1) * n / cuts);
-                if range.0 < range.1 {
-                    shares.push((g, range));
-                    share_costs.push(cost / cuts as f64);
-                }
+                shares.push((g, (r * n / cuts, (r + 1) * n / cuts)));
+                share_costs.push(cost / cuts as f64);
             }
         }
         self.dist.groups_prepared += jobs.iter().filter(|&&(_, cuts, _)| cuts > 1).count() as u64;
