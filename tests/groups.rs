@@ -165,7 +165,9 @@ fn a_pour_ends_the_same_whatever_the_group_margin() {
 /// pour stepped whole: every pair between parts whose paths met was found
 /// by the check between parts, and the parts that met stepped again as
 /// one. The split must have happened and merged parts, or the comparison
-/// proves nothing.
+/// proves nothing. (A part searches each pair's time of impact whole, a
+/// whole group only as far as its next event needs, `PairBook::earliest`:
+/// this also holds that the two give the same answers.)
 #[test]
 fn a_pour_ends_the_same_with_its_groups_split() {
     let scene = pour_with_late_bodies();

@@ -6,7 +6,7 @@
 use super::group::{GroupOutput, GroupState, PreparedPairs};
 use super::region::{PairKey, PairMap, Region, Segment};
 use super::stats::NumericalFailure;
-use super::toi::{Since, SolvedSince};
+use super::toi::{Search, Since, SolvedSince};
 use super::{EVENTS_PER_BODY, Executor, MAX_EARLIER_IMPACTS};
 use crate::body::{Activity, BodyState};
 use crate::collision::broadphase::SphereProxy;
@@ -48,6 +48,11 @@ struct PairBook {
     queue: BTreeSet<(ImpactTime, PairKey)>,
     /// Pairs whose time of impact is still to be found.
     dirty: BTreeSet<PairKey>,
+    /// Searches stopped part way, each under the instant before which it
+    /// can find no impact (`Search::not_before`): taken on only while that
+    /// could come before the earliest impact found (`earliest`).
+    waiting: BTreeSet<(ImpactTime, PairKey)>,
+    searches: PairMap<Search>,
     /// Each body's swept spheres and the box around them (`None`: fallen).
     spheres: Vec<Option<Swept>>,
 }
@@ -67,6 +72,8 @@ impl PairBook {
             toi: PairMap::default(),
             queue: BTreeSet::new(),
             dirty: BTreeSet::new(),
+            waiting: BTreeSet::new(),
+            searches: PairMap::default(),
             spheres: vec![None; n],
         };
         for i in 0..n {
@@ -101,6 +108,9 @@ impl PairBook {
             self.dirty.remove(&k);
             if let Some(Some(t)) = self.toi.remove(&k) {
                 self.queue.remove(&(ImpactTime(t), k));
+            }
+            if let Some(search) = self.searches.remove(&k) {
+                self.waiting.remove(&(ImpactTime(search.not_before()), k));
             }
         }
     }
@@ -161,9 +171,17 @@ impl PairBook {
         pairs
     }
 
-    /// The earliest impact over the pairs not accepted: finds the times of
-    /// the pairs still dirty first. Ties go to the lower pair, so the order
-    /// never depends on the order of the work.
+    /// The earliest impact over the pairs not accepted: begins the search of
+    /// each pair still dirty, then takes on the searches that could still
+    /// find an earlier impact (`waiting`) until none can. A search stopped
+    /// part way gives the answer it would have given whole (the same
+    /// samples), and one forgotten before it is needed (an event moved one
+    /// of its bodies first) costs only what it took: most of a pour's
+    /// searches are (the 1000-body pour's samples after the event that
+    /// dropped their pair were 1.97 s of the 3.72 s of searches in its
+    /// 0.5–0.6 s, while it pours in).
+    /// Ties go to the lower pair, so the order never depends on the order
+    /// of the work.
     fn earliest(
         &mut self,
         g: &mut Region,
@@ -178,13 +196,50 @@ impl PairBook {
                 continue;
             }
             exec.poll();
-            let tau = g.time_of_impact(k, &self.results[&k], seg, h, since);
-            self.toi.insert(k, tau);
-            if let Some(t) = tau {
-                self.queue.insert((ImpactTime(t), k));
+            let search = g.begin_time_of_impact(k, &self.results[&k], seg, h, since);
+            self.wait_or_find(k, search);
+        }
+        loop {
+            let earliest = self.queue.first().map(|&(t, _)| t.0);
+            let Some(&(ImpactTime(from), k)) = self.waiting.first() else {
+                break;
+            };
+            // Ties go to the lower pair: a search that may end at the
+            // earliest instant itself is taken on.
+            let limit = earliest.unwrap_or(f64::INFINITY);
+            if from > limit {
+                break;
             }
+            self.waiting.pop_first();
+            let search = self
+                .searches
+                .remove(&k)
+                .expect("every waiting pair has its search");
+            exec.poll();
+            let search = match g.continue_search(search, seg, limit) {
+                Ok(tau) => Search::Found(tau),
+                Err(stopped) => stopped,
+            };
+            self.wait_or_find(k, search);
         }
         self.queue.first().map(|&(t, k)| (k, t.0))
+    }
+
+    /// Pair `k`'s time of impact where its search has ended, else its
+    /// search kept to be taken on.
+    fn wait_or_find(&mut self, k: PairKey, search: Search) {
+        match search {
+            Search::Found(tau) => {
+                self.toi.insert(k, tau);
+                if let Some(t) = tau {
+                    self.queue.insert((ImpactTime(t), k));
+                }
+            }
+            search => {
+                self.waiting.insert((ImpactTime(search.not_before()), k));
+                self.searches.insert(k, search);
+            }
+        }
     }
 
     /// Times of impact already found for `keys` (the group's first stage,

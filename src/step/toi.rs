@@ -68,6 +68,65 @@ enum Sampled {
     },
 }
 
+/// A time-of-impact search that may stop part way (`Region::continue_search`).
+pub(crate) enum Search {
+    Found(Option<f64>),
+    /// Sampling the path (boxed: most searches end at once).
+    Sampling(Box<Sampling>),
+    /// An overlapping instant found; the bisection before it is still to do.
+    Bracket(Bracket),
+}
+
+impl Search {
+    /// No impact this search can find comes before this instant: the last
+    /// sample found apart, or the bracket's lower end (the bisection
+    /// answers inside its bracket).
+    pub(crate) fn not_before(&self) -> f64 {
+        match self {
+            Search::Found(tau) => tau.unwrap_or(f64::INFINITY),
+            Search::Sampling(s) => s.prev,
+            Search::Bracket(k) => k.lo,
+        }
+    }
+}
+
+/// Where a pair's sampling stands: its bounds, set up once
+/// (`Region::begin_sampling`), and the samples' state.
+pub(crate) struct Sampling {
+    a: usize,
+    b: usize,
+    since: Option<Since>,
+    /// The end of the interval, and where the end-of-step result proves
+    /// the pair apart from (`h` where it overlaps there).
+    h: f64,
+    end_overlaps: bool,
+    apart_from: f64,
+    /// Half a thickness of relative travel, in time; the approach-speed
+    /// bound; the centres' relative acceleration; swing and turn bounds.
+    spacing: f64,
+    speed: f64,
+    accel: Vector3<f64>,
+    bounds: (f64, [(f64, f64); 2]),
+    /// The last sample found apart (at first the start), its distance and
+    /// gap bound, the one before it, and the next sample's instant.
+    prev: f64,
+    prev_gap: Option<(f64, f64)>,
+    before: Option<Apart>,
+    t: f64,
+}
+
+/// An overlapping sample `hi` after one apart, `lo`: what `Region::bisect`
+/// needs.
+pub(crate) struct Bracket {
+    a: usize,
+    b: usize,
+    since: Option<Since>,
+    lo: f64,
+    hi: f64,
+    gap: Option<(f64, f64)>,
+    before: Option<Apart>,
+}
+
 impl Region<'_> {
     /// A body an impact rolls back: a moving one that takes impulses. A
     /// driven body's path is prescribed, so it keeps its segment (rolling
@@ -139,21 +198,106 @@ impl Region<'_> {
         (start, h): (f64, f64),
         since: &SolvedSince,
     ) -> Option<f64> {
+        let search = self.begin_search(k, r, seg, (start, h), since);
+        match self.continue_search(search, seg, f64::INFINITY) {
+            Ok(tau) => tau,
+            Err(_) => unreachable!("a search without a limit ends"),
+        }
+    }
+
+    /// A time-of-impact search of pair `k` over its step, taken as far as
+    /// its first sample: `time_of_impact` in pieces (`continue_search`),
+    /// for `impacts::PairBook`, which needs a pair's answer only once it
+    /// could be the group's next event. A split group's part (`keep_answers`)
+    /// searches whole, as `time_of_impact`, to keep its answers.
+    pub(crate) fn begin_time_of_impact(
+        &mut self,
+        k: PairKey,
+        r: &PairResult,
+        seg: &[Segment],
+        h: f64,
+        since: &SolvedSince,
+    ) -> Search {
+        if self.keep_answers {
+            return Search::Found(self.time_of_impact(k, r, seg, h, since));
+        }
+        let start = seg[k.0 as usize].time.max(seg[k.1 as usize].time);
+        self.begin_search(k, r, seg, (start, h), since)
+    }
+
+    /// The search's set-up: the bounds its samples are spaced by, and the
+    /// last stretch the end-of-step result proves apart.
+    fn begin_search(
+        &mut self,
+        k: PairKey,
+        r: &PairResult,
+        seg: &[Segment],
+        (start, h): (f64, f64),
+        since: &SolvedSince,
+    ) -> Search {
         let (a, b) = (k.0 as usize, k.1 as usize);
         let since = since.get(&k).copied();
         let end_overlaps = self.overlaps_more((a, b), r, h, seg, since);
-        let interval =
-            match self.first_overlap_sample(a, b, seg, (start, h), since, (r, end_overlaps)) {
-                Sampled::Slow if end_overlaps => Some((start, h, None, None)),
-                Sampled::Slow | Sampled::Apart => None,
-                Sampled::Between {
-                    lo,
-                    hi,
-                    gap,
-                    before,
-                } => Some((lo, hi, gap, before)),
+        match self.begin_sampling(a, b, seg, (start, h), since, (r, end_overlaps)) {
+            Ok(sampling) => Search::Sampling(Box::new(sampling)),
+            Err(Sampled::Slow) if end_overlaps => Search::Bracket(Bracket {
+                a,
+                b,
+                since,
+                lo: start,
+                hi: h,
+                gap: None,
+                before: None,
+            }),
+            Err(_) => Search::Found(None),
+        }
+    }
+
+    /// Takes `search` on until its answer is known or, where `limit` is
+    /// finite, until every instant up to `limit` is known to come before
+    /// it (`Search::not_before` past `limit`): `None` then, with the search
+    /// kept where it stopped. Its samples and bisection are the ones the
+    /// whole search takes, in the same order, so the answer does not depend
+    /// on where it was stopped.
+    pub(crate) fn continue_search(
+        &mut self,
+        mut search: Search,
+        seg: &[Segment],
+        limit: f64,
+    ) -> Result<Option<f64>, Search> {
+        loop {
+            search = match search {
+                Search::Found(tau) => return Ok(tau),
+                Search::Sampling(mut s) => match self.sample_until(&mut s, seg, limit) {
+                    None => return Err(Search::Sampling(s)),
+                    Some(Sampled::Between {
+                        lo,
+                        hi,
+                        gap,
+                        before,
+                    }) => Search::Bracket(Bracket {
+                        a: s.a,
+                        b: s.b,
+                        since: s.since,
+                        lo,
+                        hi,
+                        gap,
+                        before,
+                    }),
+                    Some(_) => Search::Found(None),
+                },
+                Search::Bracket(k) if k.lo > limit => return Err(Search::Bracket(k)),
+                Search::Bracket(k) => Search::Found(Some(self.bisect(
+                    k.a,
+                    k.b,
+                    seg,
+                    k.lo,
+                    k.hi,
+                    k.since,
+                    (k.gap, k.before),
+                ))),
             };
-        interval.map(|(lo, hi, gap, before)| self.bisect(a, b, seg, lo, hi, since, (gap, before)))
+        }
     }
 
     /// An overlap that calls for a rollback: beyond the contact tolerance (or
@@ -235,11 +379,11 @@ impl Region<'_> {
     }
 
     /// For pairs that move by more than their thickness during the step,
-    /// samples the path densely enough that one cannot pass through the other
-    /// unseen; returns the interval before the first overlapping sample
+    /// the sampling of the path, dense enough that one cannot pass through
+    /// the other unseen (`sample_until` takes the samples), or `Slow`
     /// (`end_overlaps`: the end-of-step result, already known, overlaps).
     #[allow(clippy::too_many_arguments)]
-    fn first_overlap_sample(
+    fn begin_sampling(
         &mut self,
         a: usize,
         b: usize,
@@ -247,7 +391,7 @@ impl Region<'_> {
         (start, h): (f64, f64),
         since: Option<Since>,
         (end, end_overlaps): (&PairResult, bool),
-    ) -> Sampled {
+    ) -> Result<Sampling, Sampled> {
         // Each body at both ends of the interval: its travel, its swing and
         // the approach-speed bound all come from these four states.
         let ends =
@@ -272,7 +416,7 @@ impl Region<'_> {
             .min_thickness
             .min(self.object(b).min_thickness);
         if travel <= 0.5 * thickness {
-            return Sampled::Slow;
+            return Err(Sampled::Slow);
         }
         // Samples every half thickness of relative travel, and further where
         // the pair is far apart: from a gap g no point can close it before
@@ -331,33 +475,55 @@ impl Region<'_> {
             );
             h - (gap / speed).max(along)
         };
-        let (mut prev, mut prev_gap) = (start, None);
-        // The apart sample before `prev`, and its V-Clip distance.
-        let mut before: Option<(f64, f64)> = None;
-        let mut t = (start + spacing.max(first)).min(h);
-        loop {
-            if t >= apart_from {
+        Ok(Sampling {
+            a,
+            b,
+            since,
+            h,
+            end_overlaps,
+            apart_from,
+            spacing,
+            speed,
+            accel,
+            bounds: (swing, turn),
+            prev: start,
+            prev_gap: None,
+            before: None,
+            t: (start + spacing.max(first)).min(h),
+        })
+    }
+
+    /// Takes the samples of `s` in order while the last one found apart
+    /// (`prev`, at first the start) is not past `limit`; returns the
+    /// interval before the first overlapping sample, `Apart` when none
+    /// (nor the end of the step) overlaps, or `None` when it stopped at
+    /// `limit` with `s` where it stopped.
+    fn sample_until(&mut self, s: &mut Sampling, seg: &[Segment], limit: f64) -> Option<Sampled> {
+        let (a, b, h) = (s.a, s.b, s.h);
+        while s.prev <= limit {
+            let t = s.t;
+            if t >= s.apart_from {
                 // The end-of-step result stands for a sample at h.
-                return if end_overlaps {
+                return Some(if s.end_overlaps {
                     Sampled::Between {
-                        lo: prev,
+                        lo: s.prev,
                         hi: h,
-                        gap: prev_gap,
-                        before,
+                        gap: s.prev_gap,
+                        before: s.before,
                     }
                 } else {
                     Sampled::Apart
-                };
+                });
             }
             let (sa, sb) = self.states_at(a, b, seg, t);
             let (r, task, far) = self.sample_states(a, b, &sa, &sb);
-            if self.overlaps_more((a, b), &r, t, seg, since) {
-                return Sampled::Between {
-                    lo: prev,
+            if self.overlaps_more((a, b), &r, t, seg, s.since) {
+                return Some(Sampled::Between {
+                    lo: s.prev,
                     hi: t,
-                    gap: prev_gap,
-                    before,
-                };
+                    gap: s.prev_gap,
+                    before: s.before,
+                });
             }
             // A lower bound on the gap: V-Clip's distance over the part pairs
             // it tested, and for the others the gap between their part
@@ -370,12 +536,13 @@ impl Region<'_> {
                 r.contacts.first().map(|c| c.normal),
                 Some(sa.position - sb.position),
             ];
-            let along = self.longest_closing_time((a, &sa), (b, &sb), axes, accel, (swing, turn));
-            before = prev_gap.map(|(distance, _)| (prev, distance));
-            prev = t;
-            prev_gap = (!r.penetrating).then_some((r.distance, gap));
-            t = (t + spacing.max(gap / speed).max(along)).min(h);
+            let along = self.longest_closing_time((a, &sa), (b, &sb), axes, s.accel, s.bounds);
+            s.before = s.prev_gap.map(|(distance, _)| (s.prev, distance));
+            s.prev = t;
+            s.prev_gap = (!r.penetrating).then_some((r.distance, gap));
+            s.t = (t + s.spacing.max(gap / s.speed).max(along)).min(h);
         }
+        None
     }
 
     /// The longest `closing_time` over the axes given (0 with none).
