@@ -60,13 +60,13 @@ fn pile(x: f64) -> String {
 }
 
 /// A pour of 40 bodies, and two late bodies that land on it once it
-/// rests (from 6 m and 9 m).
+/// rests (from 12 m and 16 m, landing at 1.6 s and 1.8 s).
 fn pour_with_late_bodies() -> String {
     format!(
         "{OBJECTS}[[scatter]]\nobjects = [\"nut\", \"bolt\"]\ncount = 40\n\
          min = [-0.15, -0.15, 0.05]\nmax = [0.15, 0.15, 0.6]\nseed = 3\nrandom_orientation = true\n\
-         [[bodies]]\nobject = \"bolt\"\nposition = [0.02, 0.0, 6.0]\n\
-         [[bodies]]\nobject = \"nut\"\nposition = [-0.05, 0.03, 9.0]\n"
+         [[bodies]]\nobject = \"bolt\"\nposition = [0.02, 0.0, 12.0]\n\
+         [[bodies]]\nobject = \"nut\"\nposition = [-0.05, 0.03, 16.0]\n"
     )
 }
 
@@ -117,8 +117,8 @@ fn far_apart_piles_step_to_the_bit_as_if_alone() {
     );
 }
 
-/// A pour (and two late bodies that land on it once it rests, from 6 m and
-/// 9 m) whose bodies chain into groups differently with each margin (the
+/// A pour (and two late bodies that land on it once it rests, from 12 m and
+/// 16 m) whose bodies chain into groups differently with each margin (the
 /// share of its radius by which a predicted sphere grows when the groups
 /// are formed) ends on one state hash: merging bodies that never meet into
 /// one group changes nothing. (The 200-body pour of `scripts/bench_pour.sh`
@@ -131,7 +131,7 @@ fn a_pour_ends_the_same_whatever_the_group_margin() {
     let run_with = |margin: f64| {
         let mut w = world(&scene);
         w.group_margin = margin;
-        run_until(&mut w, &mut Inline::default(), 1.6);
+        run_until(&mut w, &mut Inline::default(), 2.2);
         w
     };
     let reference = run_with(0.0);
@@ -174,7 +174,7 @@ fn a_pour_ends_the_same_with_its_groups_split() {
     let run_with = |split: bool| {
         let mut w = world(&scene);
         w.split_groups = split;
-        run_until(&mut w, &mut Inline::default(), 1.6);
+        run_until(&mut w, &mut Inline::default(), 2.2);
         w
     };
     let whole = run_with(false);

@@ -1337,3 +1337,37 @@ fn numbers_at_the_bounds_load() {
     assert_eq!(s.settings.total_steps(), 1_000_000_000);
     assert_eq!(s.bodies.len(), 4);
 }
+
+/// The time-of-impact sampling spaces its samples by the thinnest wall of
+/// either body (`ObjectDef::min_thickness`): a face glued to another part
+/// is inside the body, not a wall. A nut's wall is its flats less its hole
+/// (9 mm for the default nut; 16 mm high), not the 3 mm width of the
+/// wedges it is made of; a box is as thick as its smallest extent, alone
+/// or cut into slabs glued together.
+#[test]
+fn min_thickness_is_the_thinnest_wall_not_the_thinnest_part() {
+    let (nut, bolt) = nut_and_bolt();
+    // Each wedge's centroid lies between the hole and the flats, so twice
+    // its distance to the nearer of them is below the 9 mm wall (8.9 mm);
+    // its glued sides, 1.6 mm away, no longer count.
+    assert!(
+        (0.006..=0.009).contains(&nut.min_thickness),
+        "nut: {}",
+        nut.min_thickness
+    );
+    // The bolt's head (12 mm high) sits on its shaft: the head's bottom face
+    // is partly bare, so it still counts; the shaft's top is glued.
+    assert!(
+        (0.010..=0.012).contains(&bolt.min_thickness),
+        "bolt: {}",
+        bolt.min_thickness
+    );
+    let cube = thing("shape = { box = { half_extents = [0.5, 0.3, 0.2] } }\nmass = 1.0");
+    assert_close(cube.min_thickness, 0.4, 1e-12, "box");
+    let slabs = thing(&format!(
+        "shape = {{ mesh = {{ path = \"{}\" }} }}\nmass = 1.0",
+        data("three_slabs.obj")
+    ));
+    assert_eq!(slabs.parts.len(), 3);
+    assert_close(slabs.min_thickness, 0.4, 1e-12, "three glued slabs");
+}

@@ -59,9 +59,11 @@ pub struct ObjectDef {
     pub color: [f32; 3],
     pub polygon_count: usize,
     pub volume: f64,
-    /// Smallest thickness of any part (twice its smallest centroid-to-face
-    /// distance): a body moving less than half of this per sample cannot pass
-    /// through another unseen.
+    /// Its thinnest wall: per part, twice the smallest distance from the
+    /// part's centroid to a face of the body's surface (a face glued to
+    /// another part's is inside the body; `scene::min_thickness`). A body
+    /// moving less than half of this per sample cannot pass through
+    /// another unseen.
     pub min_thickness: f64,
 }
 
