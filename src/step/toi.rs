@@ -1042,6 +1042,14 @@ impl Region<'_> {
     /// and an impact in a pile re-solves its contact island only, not every
     /// body whose swept spheres chain to it (in a pour of 1000 that chain
     /// held about half of the bodies).
+    ///
+    /// A body whose path starts after τ has none there: it took an event
+    /// after τ before an earlier impact (`earlier_impact`) was found at τ.
+    /// It keeps its path and its pairs are not queried at τ (they are
+    /// searched again from its path's start once the group's paths are
+    /// new). Rolled back with the group, its state at τ was its later path
+    /// run backwards: a body that had bounced off the floor 3 ms later was
+    /// put 0.17 mm into it (the 1000-body pour, seed 2, at 1.07 s).
     pub(crate) fn impact_group(
         &mut self,
         exec: &mut dyn Executor,
@@ -1052,6 +1060,7 @@ impl Region<'_> {
         solved_together: &SolvedTogether,
     ) -> (Vec<(usize, BodyState)>, Vec<PairKey>, Vec<PairResult>) {
         let n = self.bodies.len();
+        let has_state = |i: usize| seg[i].time <= tau;
         // Bodies in the group or queued for it.
         let mut claimed = vec![false; n];
         let mut group: Vec<usize> = Vec::new();
@@ -1079,7 +1088,7 @@ impl Region<'_> {
             let mut k = 0;
             while k < frontier.len() {
                 for &j in solved_together.partners(frontier[k]) {
-                    if !claimed[j] && self.rolls_back(j) {
+                    if !claimed[j] && self.rolls_back(j) && has_state(j) {
                         claimed[j] = true;
                         frontier.push(j);
                     }
@@ -1093,7 +1102,7 @@ impl Region<'_> {
             for &i in &frontier {
                 for &j in &neighbours[i] {
                     let k = ((i as u32).min(j), (i as u32).max(j));
-                    if queried.insert(k) {
+                    if has_state(j as usize) && queried.insert(k) {
                         layer.push(k);
                     }
                 }
