@@ -647,7 +647,7 @@ fn build_object(
         .collect();
     // Triangles, as the thesis counts polygons (a cube has 12).
     let polygon_count = parts.iter().map(|p| p.hull.triangles().len()).sum();
-    let thickness = min_thickness(&parts.iter().map(|p| &p.hull).collect::<Vec<_>>());
+    let thickness = min_thickness(&parts);
 
     let spheres = match &s.spheres {
         Some(list) => {
@@ -789,11 +789,18 @@ pub fn part_spheres(hull: &crate::collision::polyhedron::ConvexPolyhedron) -> Ve
 /// the body. A nut's 32 wedges are 3 mm wide between their glued sides, and
 /// its wall 9 mm thick between the faces of its flats and its hole: taking
 /// the wedges' width sampled the nut's pairs every 1.5 mm of travel.
-fn min_thickness(hulls: &[&ConvexPolyhedron]) -> f64 {
-    hulls
+/// Only parts whose bounding spheres touch can share a face, so a mesh of
+/// many parts tests each face against its neighbours' only.
+fn min_thickness(parts: &[Part]) -> f64 {
+    let touching = |p: &Part, q: &Part| {
+        (p.sphere.center - q.sphere.center).norm()
+            <= (p.sphere.radius + q.sphere.radius) * (1.0 + 1e-9)
+    };
+    parts
         .iter()
         .enumerate()
-        .map(|(k, hull)| {
+        .map(|(k, part)| {
+            let hull = &part.hull;
             let verts = hull.vertices();
             let c = verts.iter().sum::<Vector3<f64>>() / verts.len() as f64;
             let distance = |f: &Face| f.normal.dot(&(verts[f.vertices[0]] - c));
@@ -801,10 +808,9 @@ fn min_thickness(hulls: &[&ConvexPolyhedron]) -> f64 {
                 .faces()
                 .iter()
                 .filter(|f| {
-                    !hulls
-                        .iter()
-                        .enumerate()
-                        .any(|(j, other)| j != k && glued(hull, f, other))
+                    !parts.iter().enumerate().any(|(j, other)| {
+                        j != k && touching(part, other) && glued(hull, f, &other.hull)
+                    })
                 })
                 .map(distance)
                 .fold(f64::INFINITY, f64::min);

@@ -216,10 +216,7 @@ impl PairBook {
                 .remove(&k)
                 .expect("every waiting pair has its search");
             exec.poll();
-            let search = match g.continue_search(search, seg, limit) {
-                Ok(tau) => Search::Found(tau),
-                Err(stopped) => stopped,
-            };
+            let search = g.continue_search(search, seg, limit);
             self.wait_or_find(k, search);
         }
         self.queue.first().map(|&(t, k)| (k, t.0))
@@ -248,10 +245,7 @@ impl PairBook {
     fn known(&mut self, keys: &[PairKey], toi: Vec<Option<f64>>) {
         for (&k, tau) in keys.iter().zip(toi) {
             self.dirty.remove(&k);
-            self.toi.insert(k, tau);
-            if let Some(t) = tau {
-                self.queue.insert((ImpactTime(t), k));
-            }
+            self.wait_or_find(k, Search::Found(tau));
         }
     }
 

@@ -200,8 +200,8 @@ impl Region<'_> {
     ) -> Option<f64> {
         let search = self.begin_search(k, r, seg, (start, h), since);
         match self.continue_search(search, seg, f64::INFINITY) {
-            Ok(tau) => tau,
-            Err(_) => unreachable!("a search without a limit ends"),
+            Search::Found(tau) => tau,
+            _ => unreachable!("a search without a limit ends"),
         }
     }
 
@@ -218,10 +218,10 @@ impl Region<'_> {
         h: f64,
         since: &SolvedSince,
     ) -> Search {
-        if self.keep_answers {
-            return Search::Found(self.time_of_impact(k, r, seg, h, since));
-        }
         let start = seg[k.0 as usize].time.max(seg[k.1 as usize].time);
+        if self.keep_answers {
+            return Search::Found(self.time_of_impact_within(k, r, seg, (start, h), since));
+        }
         self.begin_search(k, r, seg, (start, h), since)
     }
 
@@ -253,23 +253,23 @@ impl Region<'_> {
         }
     }
 
-    /// Takes `search` on until its answer is known or, where `limit` is
-    /// finite, until every instant up to `limit` is known to come before
-    /// it (`Search::not_before` past `limit`): `None` then, with the search
-    /// kept where it stopped. Its samples and bisection are the ones the
-    /// whole search takes, in the same order, so the answer does not depend
-    /// on where it was stopped.
+    /// Takes `search` on until its answer is known (`Search::Found`) or,
+    /// where `limit` is finite, until no impact it can find comes before
+    /// `limit` (`Search::not_before` past it): the search is returned where
+    /// it stopped then. Its samples and bisection are the ones the whole
+    /// search takes, in the same order, so the answer does not depend on
+    /// where it was stopped.
     pub(crate) fn continue_search(
         &mut self,
         mut search: Search,
         seg: &[Segment],
         limit: f64,
-    ) -> Result<Option<f64>, Search> {
+    ) -> Search {
         loop {
             search = match search {
-                Search::Found(tau) => return Ok(tau),
+                Search::Found(tau) => return Search::Found(tau),
                 Search::Sampling(mut s) => match self.sample_until(&mut s, seg, limit) {
-                    None => return Err(Search::Sampling(s)),
+                    None => return Search::Sampling(s),
                     Some(Sampled::Between {
                         lo,
                         hi,
@@ -286,7 +286,7 @@ impl Region<'_> {
                     }),
                     Some(_) => Search::Found(None),
                 },
-                Search::Bracket(k) if k.lo > limit => return Err(Search::Bracket(k)),
+                Search::Bracket(k) if k.lo > limit => return Search::Bracket(k),
                 Search::Bracket(k) => Search::Found(Some(self.bisect(
                     k.a,
                     k.b,
