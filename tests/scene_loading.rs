@@ -297,7 +297,7 @@ fn geodesic_sphere_volume_is_the_sum_of_its_tetrahedra_and_converges_from_below(
             &format!("s = {s}: tetrahedra"),
         );
         assert_eq!(
-            merged_faces(&o),
+            merged_faces(o),
             20 * 4usize.pow(s as u32),
             "s = {s}: face count"
         );

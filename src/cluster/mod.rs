@@ -1679,6 +1679,10 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
     }
 }
 
+/// A frame's send on its way to the renderer, and its buffer (freed once
+/// the send completes).
+type FrameInFlight = (Request<'static, [u8], StaticScope>, *mut [u8]);
+
 /// Frames the renderer holds at most; beyond this the oldest are dropped
 /// (and counted), so a slow renderer never queues without bound.
 pub const RENDER_QUEUE: usize = 64;
@@ -1694,7 +1698,7 @@ pub struct RemoteFrames<'w> {
     renderer: i32,
     /// The render rank's host, for the message if it stops answering.
     host: String,
-    in_flight: Vec<(Request<'static, [u8], StaticScope>, *mut [u8])>,
+    in_flight: Vec<FrameInFlight>,
     pub dropped: u64,
     pub bytes_sent: u64,
     report: Option<RenderReport>,

@@ -921,10 +921,11 @@ fn solve_phase(
         // to COMPLIANT_RETRY_ROWS only: compliance clamps every redundant
         // row too, and on the 800 rows of a stack of 50 one retry took
         // seconds, where Gauss-Seidel takes milliseconds.
-        Err(e) => match (m <= COMPLIANT_RETRY_ROWS)
-            .then(|| solve(&compliant(&a, m), &options))
-            .unwrap_or_else(|| Err(e.clone()))
-        {
+        Err(e) => match if m <= COMPLIANT_RETRY_ROWS {
+            solve(&compliant(&a, m), &options)
+        } else {
+            Err(e.clone())
+        } {
             Ok(sol) => {
                 stats.pivots += sol.pivots as u64;
                 stats.compliant_solves += 1;

@@ -73,7 +73,7 @@ pub(crate) fn flatten(index: usize, mesh: &Mesh) -> Result<FlatMesh, RenderError
         mesh: index,
         reason,
     };
-    if !mesh.indices.len().is_multiple_of(3) {
+    if mesh.indices.len() % 3 != 0 {
         return Err(bad(format!(
             "{} indices is not a whole number of triangles",
             mesh.indices.len()

@@ -45,7 +45,7 @@ impl VideoWriter {
         command.args(["-f", "rawvideo", "-pix_fmt", "rgba"]);
         command.args(["-s", &format!("{width}x{height}"), "-r", &fps.to_string()]);
         command.args(["-i", "-"]);
-        if !width.is_multiple_of(2) || !height.is_multiple_of(2) {
+        if width % 2 != 0 || height % 2 != 0 {
             let [r, g, b, _] = BACKGROUND;
             command.args([
                 "-vf",

@@ -116,7 +116,7 @@ fn read_obj(path: &Path) -> Result<Vec<RawPart>, (String, String)> {
             let vertices: Vec<Vector3<f64>> = mesh
                 .positions
                 .chunks_exact(3)
-                .map(|p| Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                .map(|p| Vector3::new(p[0], p[1], p[2]))
                 .collect();
             let mut faces = Vec::new();
             if mesh.face_arities.is_empty() {

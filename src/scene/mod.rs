@@ -549,7 +549,8 @@ fn build_object(
         .flat_map(|p| p.hull.vertices().iter())
         .map(|v| v.norm())
         .fold(0.0, f64::max);
-    if !(props.volume > 1e-12 * scale.powi(3)) {
+    // NaN fails too.
+    if props.volume.is_nan() || props.volume <= 1e-12 * scale.powi(3) {
         return Err((
             format!("{f}.shape"),
             format!("has zero volume ({:e} m³)", props.volume),

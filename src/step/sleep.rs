@@ -145,13 +145,13 @@ impl Region<'_> {
             }
         }
         let mut ready: HashMap<u32, bool> = HashMap::new();
-        for i in 0..n {
+        for (i, &held) in blocked.iter().enumerate() {
             let b = &self.bodies[i];
             if !(b.is_dynamic() && b.activity == Activity::Awake) {
                 continue;
             }
             let root = sets.find(i as u32);
-            let ok = self.sleep_timer[i] >= self.st.sleep_after && !blocked[i];
+            let ok = self.sleep_timer[i] >= self.st.sleep_after && !held;
             let e = ready.entry(root).or_insert(true);
             *e &= ok;
         }
