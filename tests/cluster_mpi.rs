@@ -1092,7 +1092,8 @@ fn stalled_renderer_ends_the_job_after_the_results_are_written() {
 
 /// `summary.json` reports the parallel fraction p (the share of the wall
 /// time spent in stages other ranks can take) and the Amdahl bound
-/// 1 / (1 − p); on the nuts and bolts most of a rank's time is such work.
+/// 1 / (1 − p), and the group stage's bound on 2 to 16 ranks; on the nuts
+/// and bolts most of a rank's time is such work.
 #[test]
 fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
     let _one = one_at_a_time();
@@ -1131,4 +1132,22 @@ fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
         largest > 0.0 && largest < 1.0,
         "largest group's share {largest}"
     );
+    // The group stage's bound on R ranks, groups whole: at least 1, at most
+    // R, growing with R, and never past what the largest group's share
+    // allows (each step's max(largest, all / R) is at least its largest).
+    let bounds = d["group_speedup_bound"].as_array().unwrap();
+    let ranks: Vec<u64> = bounds
+        .iter()
+        .map(|b| b["ranks"].as_u64().unwrap())
+        .collect();
+    assert_eq!(ranks, [2, 4, 8, 16]);
+    let mut last = 1.0;
+    for b in bounds {
+        let (r, s) = (b["ranks"].as_f64().unwrap(), b["speedup"].as_f64().unwrap());
+        assert!(
+            s >= last && s <= r * (1.0 + 1e-12) && s <= (1.0 + 1e-12) / largest,
+            "bound {s} on {r} ranks after {last}, largest share {largest}"
+        );
+        last = s;
+    }
 }

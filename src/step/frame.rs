@@ -65,8 +65,7 @@ pub(super) fn step_world(
             }
         }
     }
-    work.seconds += runs.iter().map(|g| g.busy_s).sum::<f64>();
-    work.largest_seconds += runs.iter().map(|g| g.busy_s).fold(0.0, f64::max);
+    work.add_step(runs.iter().map(|g| g.busy_s));
     let mut merged = merge_groups(w, runs, done.reruns);
     // The pairs between a split group's parts, which no part held, and
     // what its first stage and the checks between its parts counted.

@@ -171,7 +171,23 @@ pub struct Distribution {
     /// steps; a split group's parts count apart): no number of ranks takes
     /// the group stage below this share of its one-rank time.
     pub largest_group_share: f64,
+    /// The most R ranks can speed the group stage up, for R in
+    /// `BOUND_RANKS`: the group steps' seconds over the sum, step by step,
+    /// of max(the largest group, all the groups / R), where each group runs
+    /// whole on one rank and every rank is as fast as this run's.
+    pub group_speedup_bound: Vec<RankBound>,
 }
+
+/// One entry of `Distribution::group_speedup_bound`.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct RankBound {
+    pub ranks: u32,
+    pub speedup: f64,
+}
+
+/// The rank counts `Distribution::group_speedup_bound` is given for (the
+/// many-ranks series': `scripts/bench_many_ranks.sh`).
+pub const BOUND_RANKS: [u32; 4] = [2, 4, 8, 16];
 
 /// What the group steps cost: each body's share of its group's time in the
 /// last step (the schedule's prediction of the next), and the run's totals
@@ -181,6 +197,8 @@ pub struct GroupWork {
     pub body_cost: Vec<f64>,
     pub seconds: f64,
     pub largest_seconds: f64,
+    /// For each of `BOUND_RANKS`, the steps' max(largest group, all / R).
+    pub bound_seconds: [f64; BOUND_RANKS.len()],
 }
 
 impl GroupWork {
@@ -188,6 +206,20 @@ impl GroupWork {
         GroupWork {
             body_cost: vec![0.0; bodies],
             ..Default::default()
+        }
+    }
+
+    /// Adds one step's group steps (each one's seconds where it ran).
+    pub fn add_step(&mut self, busy: impl Iterator<Item = f64>) {
+        let (mut all, mut largest) = (0.0, 0.0_f64);
+        for s in busy {
+            all += s;
+            largest = largest.max(s);
+        }
+        self.seconds += all;
+        self.largest_seconds += largest;
+        for (bound, &r) in self.bound_seconds.iter_mut().zip(&BOUND_RANKS) {
+            *bound += largest.max(all / f64::from(r));
         }
     }
 }
@@ -209,6 +241,18 @@ impl Distribution {
         };
         self.parallel_fraction = p;
         self.amdahl_bound = 1.0 / (1.0 - p).max(1e-6);
+        self.group_speedup_bound = BOUND_RANKS
+            .iter()
+            .zip(&groups.bound_seconds)
+            .map(|(&ranks, &bound)| RankBound {
+                ranks,
+                speedup: if bound > 0.0 {
+                    groups.seconds / bound
+                } else {
+                    1.0
+                },
+            })
+            .collect();
     }
 }
 
