@@ -1190,8 +1190,10 @@ fn network(runs: &[Run], out: &Path) {
 /// rank beside Amdahl's bound 1 / ((1 − p) + p / R) with p the one-rank
 /// runs' parallel fraction (`distributed.parallel_fraction`: the share of
 /// the wall time inside work that goes to other ranks when there are
-/// some), the efficiency, how often the group steps went out, and rank 0's
-/// waiting; every run of a scene must end on one state hash.
+/// some), the efficiency, how often the group steps went out, rank 0's
+/// waiting, and the one-rank runs' bound on the group stage at R ranks
+/// with every group whole (`distributed.group_speedup_bound`); every run
+/// of a scene must end on one state hash.
 /// `many_ranks.csv`, `many_ranks.md`, `many_ranks.png`.
 fn many_ranks(runs: &[Run], out: &Path) {
     let mut scenes: BTreeMap<(u64, String), BTreeMap<u32, Vec<&Run>>> = BTreeMap::new();
@@ -1205,7 +1207,8 @@ fn many_ranks(runs: &[Run], out: &Path) {
     }
     let mut csv = String::from(
         "scene,bodies,ranks,runs,sim_s,wall_median_s,speedup,amdahl_bound,efficiency,\
-         groups_distributed_share,rank0_waiting_share,largest_group_share,hashes\n",
+         groups_distributed_share,rank0_waiting_share,largest_group_share,\
+         group_stage_bound,hashes\n",
     );
     let mut md = String::new();
     let (mut measured, mut bound_lines, mut per_sim) = (Vec::new(), Vec::new(), Vec::new());
@@ -1232,8 +1235,9 @@ fn many_ranks(runs: &[Run], out: &Path) {
              Parallel fraction on one rank p = {p:.3} (Amdahl's bound at R ranks: \
              1 / ((1 − p) + p / R)). State hashes: {} ({}).\n\n\
              | ranks | runs | wall [s] | speed-up | Amdahl's bound | efficiency | \
-             steps with group steps sent out | rank 0 waiting | largest group's share |\n\
-             |---|---|---|---|---|---|---|---|---|",
+             steps with group steps sent out | rank 0 waiting | largest group's share | \
+             group stage's bound, groups whole |\n\
+             |---|---|---|---|---|---|---|---|---|---|",
             med(by.values().next().map_or(&[][..], |v| &v[..]), &|s| f(
                 s,
                 &["sim_time_s"]
@@ -1260,20 +1264,38 @@ fn many_ranks(runs: &[Run], out: &Path) {
                 f(&s["per_rank"][0], &["waiting_s"]) / f(s, &["wall_time_s"])
             });
             let largest = med(rs, &|s| f(s, &["distributed", "largest_group_share"]));
+            // The one-rank runs' bound on the group stage at this many
+            // ranks (`distributed.group_speedup_bound`), where given.
+            let group_bound = if ranks == 1 {
+                1.0
+            } else {
+                one.map_or(f64::NAN, |rs| {
+                    med(rs, &|s| {
+                        s["distributed"]["group_speedup_bound"]
+                            .as_array()
+                            .and_then(|bs| {
+                                bs.iter()
+                                    .find(|b| b["ranks"].as_u64() == Some(u64::from(ranks)))
+                            })
+                            .and_then(|b| b["speedup"].as_f64())
+                            .unwrap_or(f64::NAN)
+                    })
+                })
+            };
             let run_hashes: Vec<&str> = rs
                 .iter()
                 .filter_map(|r| r.s["state_hash"].as_str())
                 .collect();
             let _ = writeln!(
                 csv,
-                "{scene},{bodies},{ranks},{},{sim},{wall:e},{speedup:.4},{amdahl:.4},{:.4},{sent:.4},{waiting:.4},{largest:.4},{}",
+                "{scene},{bodies},{ranks},{},{sim},{wall:e},{speedup:.4},{amdahl:.4},{:.4},{sent:.4},{waiting:.4},{largest:.4},{group_bound:.4},{}",
                 rs.len(),
                 speedup / ranks as f64,
                 run_hashes.join(" ")
             );
             let _ = writeln!(
                 md,
-                "| {ranks} | {} | {wall:.3} | {speedup:.2} | {amdahl:.2} | {:.0} % | {:.0} % | {:.0} % | {:.0} % |",
+                "| {ranks} | {} | {wall:.3} | {speedup:.2} | {amdahl:.2} | {:.0} % | {:.0} % | {:.0} % | {:.0} % | {group_bound:.2} |",
                 rs.len(),
                 100.0 * speedup / ranks as f64,
                 100.0 * sent,
