@@ -921,44 +921,43 @@ fn solve_phase(
         // to COMPLIANT_RETRY_ROWS only: compliance clamps every redundant
         // row too, and on the 800 rows of a stack of 50 one retry took
         // seconds, where Gauss-Seidel takes milliseconds.
-        Err(e) => match if m <= COMPLIANT_RETRY_ROWS {
-            solve(&compliant(&a, m), &options)
-        } else {
-            Err(e.clone())
-        } {
-            Ok(sol) => {
-                stats.pivots += sol.pivots as u64;
-                stats.compliant_solves += 1;
-                sol.x
+        Err(e) => {
+            let retried = (m <= COMPLIANT_RETRY_ROWS).then(|| solve(&compliant(&a, m), &options));
+            match retried {
+                Some(Ok(sol)) => {
+                    stats.pivots += sol.pivots as u64;
+                    stats.compliant_solves += 1;
+                    sol.x
+                }
+                // Where Dantzig's friction passes cycle on both systems (the
+                // bounds follow normal impulses that move with them), the
+                // sequential impulses with the subspace step may still meet
+                // the conditions (to `ITERATIVE_RESIDUAL` on the
+                // `ITERATIVE_COMPLIANCE` system): their answer if they do.
+                _ => match unconverged
+                    .is_none()
+                    .then(|| match swept.clone() {
+                        // The start sweeps' answer, where it met the conditions.
+                        Some((p, met)) => (p, met, 0),
+                        None => sweeps_of(ITERATIVE_SWEEPS),
+                    })
+                    .inspect(|&(_, _, sweeps)| stats.iterative_sweeps += sweeps as u64)
+                    .filter(|&(_, met, _)| met)
+                    .map(|(p, _, _)| p)
+                {
+                    Some(p) => {
+                        stats.iterative_rescues += 1;
+                        p
+                    }
+                    None => {
+                        stats.record_failure(m, e.to_string());
+                        unconverged
+                            .or(swept.map(|(p, _)| p))
+                            .unwrap_or_else(|| fallback(&a, m, &rhs, &lo, &hi, &findex))
+                    }
+                },
             }
-            // Where Dantzig's friction passes cycle on both systems (the
-            // bounds follow normal impulses that move with them), the
-            // sequential impulses with the subspace step may still meet
-            // the conditions (to `ITERATIVE_RESIDUAL` on the
-            // `ITERATIVE_COMPLIANCE` system): their answer if they do.
-            Err(_) => match unconverged
-                .is_none()
-                .then(|| match swept.clone() {
-                    // The start sweeps' answer, where it met the conditions.
-                    Some((p, met)) => (p, met, 0),
-                    None => sweeps_of(ITERATIVE_SWEEPS),
-                })
-                .inspect(|&(_, _, sweeps)| stats.iterative_sweeps += sweeps as u64)
-                .filter(|&(_, met, _)| met)
-                .map(|(p, _, _)| p)
-            {
-                Some(p) => {
-                    stats.iterative_rescues += 1;
-                    p
-                }
-                None => {
-                    stats.record_failure(m, e.to_string());
-                    unconverged
-                        .or(swept.map(|(p, _)| p))
-                        .unwrap_or_else(|| fallback(&a, m, &rhs, &lo, &hi, &findex))
-                }
-            },
-        },
+        }
     };
     note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
     let p = energy_guard(&diag, &rows, (v, w, &bias), p, stats, |vel| {
