@@ -752,6 +752,10 @@ fn hetero(runs: &[Run], out: &Path, md: &mut String) {
 /// variant), medians over the reps of wall per simulated second, stage
 /// shares, impact events, queries per event and groups; `pours.md`,
 /// `pours.csv`, `pours.png`.
+/// One point of the pours' plot: bodies, commit, wall per simulated
+/// second, queries per impact event.
+type PourPoint = (u64, String, f64, f64);
+
 fn pours(runs: &[Run], out: &Path, md: &mut String) {
     let pour: Vec<&Run> = runs.iter().filter(|r| r.series == "pour").collect();
     if pour.is_empty() {
@@ -795,7 +799,7 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
     csv.push('\n');
     md.push_str("## Pours (nuts and bolts onto the floor, one rank, `--no-render`)\n\n");
     md.push_str("| bodies | commit | runs | simulated [s] | ended | wall per simulated s | outside solve_islands per simulated s | worst 0.1 s frame [s] | time of impact | solve_islands | narrowphase | broadphase | impact events | queries per event | groups | largest group | group re-runs | deepest overlap [µm] | accepted |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-    let mut rows: Vec<(u64, String, f64, f64)> = Vec::new();
+    let mut rows: Vec<PourPoint> = Vec::new();
     for (bodies, variant) in &keys {
         let rs: Vec<&Run> = pour
             .iter()
@@ -890,7 +894,7 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
         md.push('\n');
     }
     std::fs::write(out.join("pours.csv"), csv).expect("write pours.csv");
-    let series_of = |pick: &dyn Fn(&(u64, String, f64, f64)) -> f64| -> Vec<plot::Series> {
+    let series_of = |pick: &dyn Fn(&PourPoint) -> f64| -> Vec<plot::Series> {
         variants
             .iter()
             .map(|v| plot::Series {
