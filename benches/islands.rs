@@ -157,7 +157,7 @@ const PATHS: [&str; 9] = [
     "sequential impulses unconverged, then Dantzig",
     "sequential impulses unconverged, kept (400 rows and more)",
     "sequential impulses converged",
-    "Dantzig failed, sequential impulses met the conditions",
+    "Dantzig failed, sweeps or interior point met",
     "Dantzig after its compliant retry",
     "Dantzig's method only",
 ];
