@@ -936,10 +936,11 @@ fn solve_phase(
                 // the conditions (to `ITERATIVE_RESIDUAL` on the
                 // `ITERATIVE_COMPLIANCE` system): their answer if they do.
                 // Else the interior point on the exact system, where it was
-                // not tried first (below `INTERIOR_MIN_ROWS`): on the
-                // 1000-body pile's 1.0-1.1 s it met all four small islands
-                // that ended here, whose fallback answers had missed the
-                // conditions by 1e-2 to 3e-2 m/s.
+                // not tried first (below `INTERIOR_MIN_ROWS`, or where the
+                // last impulses were close enough for Dantzig's method): on
+                // the 1000-body pile's 1.0-1.1 s it met all four small
+                // islands that ended here, whose fallback answers had
+                // missed the conditions by 1e-2 to 3e-2 m/s.
                 _ => match unconverged
                     .is_none()
                     .then(|| match swept.clone() {
@@ -951,24 +952,11 @@ fn solve_phase(
                     .filter(|&(_, met, _)| met)
                     .map(|(p, _, _)| p)
                     .or_else(|| {
-                        let untried = interior_moving.is_none()
-                            && task.iterative_min_rows != u32::MAX
-                            && super::interior::takes(super::interior::moving_count(
-                                &rows,
-                                v.len(),
-                            ));
-                        let exact = IterativeSystem {
-                            compliance: 0.0,
-                            ..system
-                        };
-                        let answer = untried
-                            .then(|| super::interior::solve(&exact, &warm, v.len()))
-                            .flatten()?;
-                        stats.interior_steps += answer.steps as u64;
-                        answer.met.then(|| {
-                            stats.interior_solves += 1;
-                            answer.p
-                        })
+                        let untried =
+                            interior_moving.is_none() && task.iterative_min_rows != u32::MAX;
+                        untried
+                            .then(|| interior_rescue(&system, &warm, v.len(), stats))
+                            .flatten()
                     }) {
                     Some(p) => {
                         stats.iterative_rescues += 1;
@@ -1709,6 +1697,28 @@ impl<'a> IterativeSystem<'a> {
             Step::Rejected
         }
     }
+}
+
+/// The interior point on `system` made exact (no compliance), for a
+/// system it was not tried on first: its answer where it meets the
+/// conditions. It refuses systems that move too many bodies itself
+/// (`interior::takes`).
+fn interior_rescue(
+    system: &IterativeSystem,
+    warm: &[f64],
+    bodies: usize,
+    stats: &mut SolveStats,
+) -> Option<Vec<f64>> {
+    let exact = IterativeSystem {
+        compliance: 0.0,
+        ..*system
+    };
+    let answer = super::interior::solve(&exact, warm, bodies)?;
+    stats.interior_steps += answer.steps as u64;
+    answer.met.then(|| {
+        stats.interior_solves += 1;
+        answer.p
+    })
 }
 
 /// Last-resort fallback: projected Gauss–Seidel on the boxed LCP.
