@@ -4,7 +4,8 @@
 //! properties), `collision` (broadphase, V-Clip, contact points), `contact`
 //! (islands, Dantzig LCP), `dynamics` (integration), `step` (the frame loop),
 //! `cluster` (everything MPI), `render` (off-screen frames), `output`
-//! (trajectory, summary, progress), `export` (a scene as JSON for other tools).
+//! (trajectory, summary, progress), `export` (a scene as JSON for other tools),
+//! `math` (sines with the same bits on every host).
 
 pub mod body;
 pub mod cluster;
@@ -12,6 +13,7 @@ pub mod collision;
 pub mod contact;
 pub mod dynamics;
 pub mod export;
+pub mod math;
 pub mod output;
 pub mod render;
 pub mod run;

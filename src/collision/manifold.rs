@@ -14,6 +14,7 @@
 //! closest one are kept, so a face that is nearly but not quite flat on
 //! another degrades to its touching edge or corner.
 
+use crate::math;
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -162,7 +163,7 @@ fn points_along(
         (Support::Face(..), Support::Edge(..)) | (_, Support::Vertex(_)) => NormalTurn::WithA,
         (Support::Edge(p0, p1), Support::Edge(q0, q1))
             if (p1 - p0).normalize().cross(&(q1 - q0).normalize()).norm()
-                > FACE_CONTACT_ANGLE.sin() =>
+                > math::sin(FACE_CONTACT_ANGLE) =>
         {
             NormalTurn::Edges(p1 - p0, q1 - q0)
         }
@@ -288,7 +289,7 @@ fn touching_normal(
         (Feature::Face(f), _) => return Some(-normal(a, pose_a, f)),
         (Feature::Edge(i), Feature::Edge(j)) => {
             let w = direction(a, pose_a, i).cross(&direction(b, pose_b, j));
-            if w.norm() > FACE_CONTACT_ANGLE.sin() {
+            if w.norm() > math::sin(FACE_CONTACT_ANGLE) {
                 let w = w.normalize();
                 // Out of B is along B's cone and against A's.
                 let m = cone(b, pose_b, fb) - cone(a, pose_a, fa);
@@ -374,14 +375,14 @@ impl Support {
                 edge = (s, e as usize);
             }
         }
-        if face.0 >= FACE_CONTACT_ANGLE.cos() {
+        if face.0 >= math::cos(FACE_CONTACT_ANGLE) {
             let f = &p.faces()[face.1];
             let normal = pose.rotation * f.normal;
             let polygon = f.vertices.iter().map(|&i| world(i)).collect();
             let offset = f.offset + normal.dot(&pose.translation.vector);
             return (Support::Face(polygon, normal, offset), world(v));
         }
-        if edge.0 <= FACE_CONTACT_ANGLE.sin() {
+        if edge.0 <= math::sin(FACE_CONTACT_ANGLE) {
             let ed = p.edges()[edge.1];
             return (
                 Support::Edge(world(ed.tail as usize), world(ed.head as usize)),
@@ -479,7 +480,7 @@ fn edge_edge(
     let len = (p1 - p0).norm();
     let u = (p1 - p0) / len;
     let v = (q1 - q0).normalize();
-    if u.cross(&v).norm() <= FACE_CONTACT_ANGLE.sin() {
+    if u.cross(&v).norm() <= math::sin(FACE_CONTACT_ANGLE) {
         let (t0, t1) = ((q0 - p0).dot(&u), (q1 - p0).dot(&u));
         let lo = t0.min(t1).max(0.0);
         let hi = t0.max(t1).min(len);

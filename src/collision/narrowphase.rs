@@ -8,6 +8,7 @@
 use super::manifold::{self, ContactPoint};
 use super::vclip::{self, FeaturePair, Proximity};
 use crate::body::{BodyId, ObjectDef};
+use crate::math;
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -51,7 +52,7 @@ pub fn reduce_contacts(points: Vec<ContactPoint>, max: usize) -> Vec<ContactPoin
     let mut keep = vec![deepest];
     for k in 0..max - 1 {
         let angle = std::f64::consts::TAU * k as f64 / (max - 1) as f64;
-        let dir = u * angle.cos() + v * angle.sin();
+        let dir = u * math::cos(angle) + v * math::sin(angle);
         let best = (0..points.len())
             .max_by(|&i, &j| {
                 dir.dot(&points[i].point)

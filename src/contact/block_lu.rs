@@ -296,7 +296,7 @@ impl BlockLu<'_> {
                 column[i + 1] = -sn * a + cs * b;
             }
             let (a, b) = (column[j], column[j + 1]);
-            let rho = a.hypot(b);
+            let rho = crate::math::hypot(a, b);
             let (cs, sn) = if rho > 0.0 {
                 (a / rho, b / rho)
             } else {

@@ -16,6 +16,7 @@
 //! drift (the scheme is symplectic). No explicit gyroscopic term adds energy.
 
 use crate::body::{BodyKind, BodyState, ObjectDef};
+use crate::math;
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// Yoshida's fourth-order triple-jump weights: w₁ = 1/(2 − 2^⅓), w₀ = 1 − 2w₁.
@@ -39,7 +40,7 @@ pub fn integrate(
             angular_velocity,
         } => BodyState {
             position: state.position + velocity * h,
-            orientation: UnitQuaternion::from_scaled_axis(angular_velocity * h) * state.orientation,
+            orientation: math::rotation_from_scaled_axis(angular_velocity * h) * state.orientation,
             velocity,
             angular_momentum: Vector3::zeros(),
         },
@@ -102,7 +103,7 @@ fn axis_flow(
     let theta = t * pi[i] / moments[i];
     let mut axis = Vector3::zeros();
     axis[i] = theta;
-    let rot = UnitQuaternion::from_scaled_axis(axis);
+    let rot = math::rotation_from_scaled_axis(axis);
     *rp *= rot;
     *pi = rot.inverse() * *pi;
 }

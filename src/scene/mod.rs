@@ -16,6 +16,7 @@ use crate::body::{
 };
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use crate::collision::polyhedron::{ConvexPolyhedron, Face};
+use crate::math;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use schema::{CombineRule, ObjectSection, SceneFile};
@@ -1069,10 +1070,10 @@ fn random_rotation(rng: &mut impl rand::Rng) -> UnitQuaternion<f64> {
     let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
     let tau = std::f64::consts::TAU;
     let q = nalgebra::Quaternion::new(
-        (1.0 - u1).sqrt() * (tau * u2).sin(),
-        (1.0 - u1).sqrt() * (tau * u2).cos(),
-        u1.sqrt() * (tau * u3).sin(),
-        u1.sqrt() * (tau * u3).cos(),
+        (1.0 - u1).sqrt() * math::sin(tau * u2),
+        (1.0 - u1).sqrt() * math::cos(tau * u2),
+        u1.sqrt() * math::sin(tau * u3),
+        u1.sqrt() * math::cos(tau * u3),
     );
     UnitQuaternion::from_quaternion(q)
 }

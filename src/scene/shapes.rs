@@ -4,6 +4,7 @@
 use super::mesh_files;
 use super::schema::ShapeSpec;
 use crate::collision::polyhedron::ConvexPolyhedron;
+use crate::math;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
 use std::path::Path;
@@ -313,14 +314,14 @@ pub fn regular_polygon(radius: f64, sides: usize, phase: f64) -> Vec<[f64; 2]> {
     (0..sides)
         .map(|i| {
             let a = phase + 2.0 * PI * i as f64 / sides as f64;
-            [radius * a.cos(), radius * a.sin()]
+            [radius * math::cos(a), radius * math::sin(a)]
         })
         .collect()
 }
 
 /// Regular hexagon with the given distance across flats (flats parallel to x).
 pub fn hexagon(across_flats: f64) -> Vec<[f64; 2]> {
-    let circumradius = 0.5 * across_flats / (PI / 6.0).cos();
+    let circumradius = 0.5 * across_flats / math::cos(PI / 6.0);
     regular_polygon(circumradius, 6, 0.0)
 }
 
@@ -364,14 +365,14 @@ pub fn nut_parts(
     let to_boundary = |a: f64| -> f64 {
         let sector = (a / (PI / 3.0)).floor();
         let flat_normal = sector * PI / 3.0 + PI / 6.0;
-        apothem / (a - flat_normal).cos()
+        apothem / math::cos(a - flat_normal)
     };
     let half = 0.5 * thickness;
     let mut parts = Vec::with_capacity(sides);
     for i in 0..sides {
         let a0 = 2.0 * PI * i as f64 / sides as f64;
         let a1 = 2.0 * PI * (i + 1) as f64 / sides as f64;
-        let dir = |a: f64| [a.cos(), a.sin()];
+        let dir = |a: f64| [math::cos(a), math::sin(a)];
         let mut outline = vec![
             [hole_radius * dir(a0)[0], hole_radius * dir(a0)[1]],
             [to_boundary(a0) * dir(a0)[0], to_boundary(a0) * dir(a0)[1]],

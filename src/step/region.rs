@@ -17,6 +17,7 @@ use crate::collision::narrowphase::{
     self, CONTACT_TOLERANCE, CachedFeatures, PairResult, PairTask,
 };
 use crate::dynamics::integrate::integrate;
+use crate::math;
 use crate::scene::{ForceWindow, Settings};
 use nalgebra::{Isometry3, Vector3};
 use rustc_hash::FxBuildHasher;
@@ -247,7 +248,7 @@ impl<'s> Region<'s> {
         let o = self.object(i);
         let (p0, q0) = (from.position, from.orientation);
         let (p1, q1) = (to.position, to.orientation);
-        let angle = q0.angle_to(&q1);
+        let angle = math::angle_between(&q0, &q1);
         for s in &o.spheres {
             let c0 = p0 + q0 * s.center;
             let c1 = p1 + q1 * s.center;
