@@ -343,6 +343,12 @@ fn run_scene(cli: RunArgs) -> ExitCode {
     if let Some(line) = cluster::hosts_line(&hosts) {
         say(&line);
     }
+    // And which vector units each rank's CPU has: a lab of mixed PCs is
+    // told where its results may depend on the placement.
+    let vector_units = cluster::rank_vector_units(&world);
+    if let Some(line) = cluster::mixed_vector_units_line(&vector_units) {
+        say(&line);
+    }
 
     if rank != 0 {
         if Some(rank) == roles.renderer {
@@ -399,6 +405,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         .map(|(r, host)| RankHost {
             host,
             link_bytes_per_s: link_rates.get(r).copied().flatten(),
+            vector_units: vector_units.get(r).cloned().unwrap_or_default(),
         })
         .collect();
     let outcome = run::run_coordinator(scene, &opts, &out_dir, exec, &mut *frames, resume, &hosts);

@@ -474,6 +474,8 @@ pub fn run_coordinator(
     let _ = std::fs::remove_file(&summary_path);
     let traj_path = out_dir.join("trajectory.csv");
     let mut notes = Vec::new();
+    let units: Vec<String> = hosts.iter().map(|h| h.vector_units.clone()).collect();
+    notes.extend(crate::cluster::mixed_vector_units_line(&units));
 
     let settings = scene.settings.clone();
     let (scene_path, scene_digest) = summary::scene_file_identity(&scene.path);

@@ -501,6 +501,22 @@ fn three_ranks_with_rendering_are_coordinator_worker_renderer() {
         Some(0),
         "the renderer was given tasks"
     );
+    // Every rank reports its CPU's vector units; on one machine they agree,
+    // so no warning of mixed CPUs.
+    for rank in 0..3 {
+        assert_eq!(
+            r.rank(rank)["vector_units"].as_str(),
+            Some(rigidsim::cluster::vector_units()),
+            "rank {rank}"
+        );
+    }
+    let notes = r.summary["notes"].as_array().unwrap();
+    assert!(
+        !notes
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("vector units")),
+        "{notes:?}"
+    );
 }
 
 #[test]

@@ -99,6 +99,12 @@ pub struct RankLine {
     /// reached through shared memory (no slower than an empty message).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link_bytes_per_s: Option<f64>,
+    /// The widest vector instructions of the rank's CPU that faer's kernels
+    /// choose between (`cluster::vector_units`: "avx512f", "avx2+fma" or
+    /// "sse2"); ranks that differ here may round some factorisations
+    /// differently (`notes` then says so).
+    #[serde(default)]
+    pub vector_units: String,
 }
 
 /// Where a rank ran, as rank 0 learnt at start-up.
@@ -106,6 +112,7 @@ pub struct RankLine {
 pub struct RankHost {
     pub host: String,
     pub link_bytes_per_s: Option<f64>,
+    pub vector_units: String,
 }
 
 impl RankLine {
@@ -128,6 +135,7 @@ impl RankLine {
             bytes_sent_per_frame: per_frame(account.bytes_sent),
             bytes_received_per_frame: per_frame(account.bytes_received),
             link_bytes_per_s: at.link_bytes_per_s,
+            vector_units: at.vector_units,
             account,
         }
     }
@@ -157,10 +165,12 @@ mod tests {
             RankHost {
                 host: "pc1".into(),
                 link_bytes_per_s: None,
+                vector_units: "avx2+fma".into(),
             },
             RankHost {
                 host: "pc2".into(),
                 link_bytes_per_s: Some(1.1e6),
+                vector_units: "sse2".into(),
             },
         ];
         let json = serde_json::to_value(RankLine::new(account, &hosts, 3)).unwrap();
@@ -171,6 +181,7 @@ mod tests {
         assert_eq!(json["bytes_sent_per_frame"], 100.0);
         assert_eq!(json["bytes_received_per_frame"], 200.0);
         assert_eq!(json["link_bytes_per_s"], 1.1e6);
+        assert_eq!(json["vector_units"], "sse2");
         // Rank 0 has no link of its own to report, and an unknown rank no host.
         let line = RankLine::new(RankSummary::default(), &hosts, 0);
         let json = serde_json::to_value(&line).unwrap();
