@@ -5,7 +5,8 @@
 # `rigidsim view`'s replay page: Chromium, Node.js and npm, then the viewer's
 # npm packages (viewer/node_modules, from viewer/package-lock.json), and
 # iproute2 and openssh-server for the lab in a box, valgrind for the
-# instruction counts of scripts/bench_instructions.sh. Safe to run again:
+# instruction counts of scripts/bench_instructions.sh, qemu-user for the
+# tests that emulate older CPUs. Safe to run again:
 # installs only what is missing.
 set -euo pipefail
 
@@ -31,6 +32,9 @@ command -v unshare >/dev/null 2>&1 || need+=(util-linux)
 command -v ssh >/dev/null 2>&1 || need+=(openssh-client)
 # Instruction counts for scripts/bench_instructions.sh.
 command -v valgrind >/dev/null 2>&1 || need+=(valgrind)
+# Older CPUs, emulated, for tests/hosts.rs (results that do not depend on
+# the PC's generation).
+command -v qemu-x86_64 >/dev/null 2>&1 || need+=(qemu-user)
 
 if [ ${#need[@]} -gt 0 ]; then
   echo "setup: installing ${need[*]}" >&2
