@@ -238,13 +238,23 @@ fn view_run(args: ViewArgs) -> ExitCode {
 /// another does not need. With both: 0.02 s alone, 0.12 s under `mpirun
 /// -np 2` (`README.md`, *Running on a lab's PCs*). A cluster with InfiniBand can still
 /// choose UCX by setting `OMPI_MCA_pml=ucx`.
-fn open_mpi_defaults() {
+///
+/// Without `mpirun`, the run also gets a session folder of its own (see
+/// `SessionDir`); the returned guard removes it once MPI has finished.
+fn open_mpi_defaults() -> Option<SessionDir> {
     let launched = ["OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK"]
         .iter()
         .any(|v| std::env::var_os(v).is_some());
-    let mut defaults = vec![("OMPI_MCA_pml", "ob1")];
+    let mut defaults = vec![("OMPI_MCA_pml", "ob1".to_string())];
+    let mut session = None;
     if !launched {
-        defaults.push(("OMPI_MCA_ess_singleton_isolated", "1"));
+        defaults.push(("OMPI_MCA_ess_singleton_isolated", "1".into()));
+        if std::env::var_os(SessionDir::SETTING).is_none() {
+            session = SessionDir::create();
+        }
+    }
+    if let Some(dir) = &session {
+        defaults.push((SessionDir::SETTING, dir.0.display().to_string()));
     }
     for (key, value) in defaults {
         if std::env::var_os(key).is_none() {
@@ -253,11 +263,65 @@ fn open_mpi_defaults() {
             unsafe { std::env::set_var(key, value) };
         }
     }
+    session
+}
+
+/// A folder of this process's own for Open MPI's session files, when it
+/// runs without `mpirun`. Alone, Open MPI keeps them under
+/// `/tmp/ompi.<host>.<uid>/`, shared by every such process of the user, and
+/// one that ends removes that folder while another that starts is making
+/// its own inside: "A call to mkdir was unable to create the desired
+/// directory: /tmp/ompi.vm.0/jf.0" and exit 1 at `MPI_Init`, 4 of 240 runs
+/// of four loops of one-rank runs side by side (and one CI run of the
+/// tests, which start several at once).
+struct SessionDir(std::path::PathBuf);
+
+impl SessionDir {
+    /// Open MPI's setting for where session folders go.
+    const SETTING: &str = "OMPI_MCA_orte_tmpdir_base";
+
+    /// `<temp>/rigidsim-<pid>`, made now; `None` (Open MPI's own choice)
+    /// where it cannot be made. First removes those of processes that no
+    /// longer run (a run that was killed could not remove its own).
+    fn create() -> Option<SessionDir> {
+        let temp = std::env::temp_dir();
+        Self::remove_stale(&temp);
+        let dir = temp.join(format!("{}{}", Self::PREFIX, std::process::id()));
+        std::fs::create_dir_all(&dir).ok()?;
+        Some(SessionDir(dir))
+    }
+
+    const PREFIX: &str = "rigidsim-";
+
+    fn remove_stale(temp: &std::path::Path) {
+        let Ok(entries) = std::fs::read_dir(temp) else {
+            return;
+        };
+        for entry in entries.flatten() {
+            let name = entry.file_name();
+            let pid = name
+                .to_str()
+                .and_then(|n| n.strip_prefix(Self::PREFIX))
+                .and_then(|pid| pid.parse::<u32>().ok());
+            let gone =
+                pid.is_some_and(|pid| !std::path::Path::new(&format!("/proc/{pid}")).exists());
+            if gone {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+    }
+}
+
+impl Drop for SessionDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// `rigidsim run` (and the short form): every rank of the MPI job, or the only one.
 fn run_scene(cli: RunArgs) -> ExitCode {
-    open_mpi_defaults();
+    // Declared before the universe, so removed after MPI has finalised.
+    let _session = open_mpi_defaults();
     let Some(universe) = mpi::initialize() else {
         eprintln!("rigidsim: MPI could not be initialised");
         return ExitCode::from(1);
