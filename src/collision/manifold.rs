@@ -14,7 +14,6 @@
 //! closest one are kept, so a face that is nearly but not quite flat on
 //! another degrades to its touching edge or corner.
 
-use crate::math;
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -27,6 +26,12 @@ use super::vclip::{Feature, Proximity, closest_segment_points, separating_axis};
 /// 100-sided prism (3.6° apart) stay distinct; points of a face that is
 /// tilted within it but gapes by more than `tolerance` are dropped anyway.
 pub const FACE_CONTACT_ANGLE: f64 = 0.01;
+/// The cosine and sine of `FACE_CONTACT_ANGLE` (`math::cos`, `math::sin`,
+/// to the bit: a test checks them). Written out because the `libm` crate's
+/// functions, unlike the C library's, are not folded at compile time: as
+/// calls they ran at every use, twice in each `Support::of`.
+pub const FACE_CONTACT_COS: f64 = 0.9999500004166653;
+pub const FACE_CONTACT_SIN: f64 = 0.009999833334166664;
 
 /// Points closer than this fraction of the smaller polyhedron's size are
 /// merged (clipping a polygon at its own corners repeats them).
@@ -162,8 +167,7 @@ fn points_along(
         }
         (Support::Face(..), Support::Edge(..)) | (_, Support::Vertex(_)) => NormalTurn::WithA,
         (Support::Edge(p0, p1), Support::Edge(q0, q1))
-            if (p1 - p0).normalize().cross(&(q1 - q0).normalize()).norm()
-                > math::sin(FACE_CONTACT_ANGLE) =>
+            if (p1 - p0).normalize().cross(&(q1 - q0).normalize()).norm() > FACE_CONTACT_SIN =>
         {
             NormalTurn::Edges(p1 - p0, q1 - q0)
         }
@@ -289,7 +293,7 @@ fn touching_normal(
         (Feature::Face(f), _) => return Some(-normal(a, pose_a, f)),
         (Feature::Edge(i), Feature::Edge(j)) => {
             let w = direction(a, pose_a, i).cross(&direction(b, pose_b, j));
-            if w.norm() > math::sin(FACE_CONTACT_ANGLE) {
+            if w.norm() > FACE_CONTACT_SIN {
                 let w = w.normalize();
                 // Out of B is along B's cone and against A's.
                 let m = cone(b, pose_b, fb) - cone(a, pose_a, fa);
@@ -375,14 +379,14 @@ impl Support {
                 edge = (s, e as usize);
             }
         }
-        if face.0 >= math::cos(FACE_CONTACT_ANGLE) {
+        if face.0 >= FACE_CONTACT_COS {
             let f = &p.faces()[face.1];
             let normal = pose.rotation * f.normal;
             let polygon = f.vertices.iter().map(|&i| world(i)).collect();
             let offset = f.offset + normal.dot(&pose.translation.vector);
             return (Support::Face(polygon, normal, offset), world(v));
         }
-        if edge.0 <= math::sin(FACE_CONTACT_ANGLE) {
+        if edge.0 <= FACE_CONTACT_SIN {
             let ed = p.edges()[edge.1];
             return (
                 Support::Edge(world(ed.tail as usize), world(ed.head as usize)),
@@ -480,7 +484,7 @@ fn edge_edge(
     let len = (p1 - p0).norm();
     let u = (p1 - p0) / len;
     let v = (q1 - q0).normalize();
-    if u.cross(&v).norm() <= math::sin(FACE_CONTACT_ANGLE) {
+    if u.cross(&v).norm() <= FACE_CONTACT_SIN {
         let (t0, t1) = ((q0 - p0).dot(&u), (q1 - p0).dot(&u));
         let lo = t0.min(t1).max(0.0);
         let hi = t0.max(t1).min(len);
@@ -501,6 +505,19 @@ fn edge_edge(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math;
+
+    #[test]
+    fn face_contact_cosine_and_sine_are_the_angles_to_the_bit() {
+        assert_eq!(
+            FACE_CONTACT_COS.to_bits(),
+            math::cos(FACE_CONTACT_ANGLE).to_bits()
+        );
+        assert_eq!(
+            FACE_CONTACT_SIN.to_bits(),
+            math::sin(FACE_CONTACT_ANGLE).to_bits()
+        );
+    }
 
     #[test]
     fn polygon_clip_of_overlapping_squares_is_their_intersection() {

@@ -40,9 +40,8 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::manifold::FACE_CONTACT_ANGLE;
+use super::manifold::FACE_CONTACT_COS;
 use super::polyhedron::{ConvexPolyhedron, VoronoiPlane};
-use crate::math;
 
 /// A vertex, edge or face of one polyhedron, by index into its tables.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -984,7 +983,7 @@ pub fn separating_axis(
     // hull's bottom edge, both on a floor, overlapped 0.750 µm across the
     // edges and 0.776 µm along the hull's face 15° away, whose contact
     // points missed the overlap (docs/stability.md, *Regression scenes*).
-    let reproduces_face = best_edge.1.dot(&best_face.1) >= math::cos(FACE_CONTACT_ANGLE);
+    let reproduces_face = best_edge.1.dot(&best_face.1) >= FACE_CONTACT_COS;
     let bias = if reproduces_face {
         EDGE_AXIS_REL_BIAS * a.scale().min(b.scale())
     } else {
