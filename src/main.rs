@@ -239,22 +239,22 @@ fn view_run(args: ViewArgs) -> ExitCode {
 /// -np 2` (`README.md`, *Running on a lab's PCs*). A cluster with InfiniBand can still
 /// choose UCX by setting `OMPI_MCA_pml=ucx`.
 ///
-/// Without `mpirun`, the run also gets a session folder of its own (see
-/// `SessionDir`); the returned guard removes it once MPI has finished.
-fn open_mpi_defaults() -> Option<SessionDir> {
+/// Without `mpirun`, the run also gets a temporary folder of its own (see
+/// `MpiTempDir`); the returned guard removes it once MPI has finished.
+fn open_mpi_defaults() -> Option<MpiTempDir> {
     let launched = ["OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK"]
         .iter()
         .any(|v| std::env::var_os(v).is_some());
     let mut defaults = vec![("OMPI_MCA_pml", "ob1".to_string())];
-    let mut session = None;
+    let mut temp_dir = None;
     if !launched {
         defaults.push(("OMPI_MCA_ess_singleton_isolated", "1".into()));
-        if std::env::var_os(SessionDir::SETTING).is_none() {
-            session = SessionDir::create();
+        if std::env::var_os(MpiTempDir::SETTING).is_none() {
+            temp_dir = MpiTempDir::create();
         }
     }
-    if let Some(dir) = &session {
-        defaults.push((SessionDir::SETTING, dir.0.display().to_string()));
+    if let Some(dir) = &temp_dir {
+        defaults.push((MpiTempDir::SETTING, dir.0.display().to_string()));
     }
     for (key, value) in defaults {
         if std::env::var_os(key).is_none() {
@@ -263,10 +263,10 @@ fn open_mpi_defaults() -> Option<SessionDir> {
             unsafe { std::env::set_var(key, value) };
         }
     }
-    session
+    temp_dir
 }
 
-/// A folder of this process's own for Open MPI's session files, when it
+/// A folder of this process's own for Open MPI's temporary files, when it
 /// runs without `mpirun`. Alone, Open MPI keeps them under
 /// `/tmp/ompi.<host>.<uid>/`, shared by every such process of the user, and
 /// one that ends removes that folder while another that starts is making
@@ -274,21 +274,21 @@ fn open_mpi_defaults() -> Option<SessionDir> {
 /// directory: /tmp/ompi.vm.0/jf.0" and exit 1 at `MPI_Init`, 4 of 240 runs
 /// of four loops of one-rank runs side by side (and one CI run of the
 /// tests, which start several at once).
-struct SessionDir(std::path::PathBuf);
+struct MpiTempDir(std::path::PathBuf);
 
-impl SessionDir {
-    /// Open MPI's setting for where session folders go.
+impl MpiTempDir {
+    /// Open MPI's setting for where its temporary folders go.
     const SETTING: &str = "OMPI_MCA_orte_tmpdir_base";
 
     /// `<temp>/rigidsim-<pid>`, made now; `None` (Open MPI's own choice)
     /// where it cannot be made. First removes those of processes that no
     /// longer run (a run that was killed could not remove its own).
-    fn create() -> Option<SessionDir> {
+    fn create() -> Option<MpiTempDir> {
         let temp = std::env::temp_dir();
         Self::remove_stale(&temp);
         let dir = temp.join(format!("{}{}", Self::PREFIX, std::process::id()));
         std::fs::create_dir_all(&dir).ok()?;
-        Some(SessionDir(dir))
+        Some(MpiTempDir(dir))
     }
 
     const PREFIX: &str = "rigidsim-";
@@ -312,7 +312,7 @@ impl SessionDir {
     }
 }
 
-impl Drop for SessionDir {
+impl Drop for MpiTempDir {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
     }
@@ -321,7 +321,7 @@ impl Drop for SessionDir {
 /// `rigidsim run` (and the short form): every rank of the MPI job, or the only one.
 fn run_scene(cli: RunArgs) -> ExitCode {
     // Declared before the universe, so removed after MPI has finalised.
-    let _session = open_mpi_defaults();
+    let _mpi_temp = open_mpi_defaults();
     let Some(universe) = mpi::initialize() else {
         eprintln!("rigidsim: MPI could not be initialised");
         return ExitCode::from(1);

@@ -17,7 +17,7 @@
 mod common;
 
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 
 /// glibc's switch (2.26 and later) that hides these CPU features from its
 /// own choice of routines; the old and the new spellings of the names.
@@ -27,13 +27,11 @@ const WITHOUT_FMA: &str = "glibc.cpu.hwcaps=-AVX2_Usable,-FMA_Usable,-AVX2,-FMA,
 /// follows).
 const RUN_ARGS: [&str; 5] = ["--duration", "0.6", "--no-render", "--no-progress", "--out"];
 
-/// `program`, with Open MPI's consent to root and glibc left to choose.
+/// `program` as the tests start it (`common::command`), glibc left to
+/// choose.
 fn command(program: &str) -> Command {
-    let mut cmd = Command::new(program);
-    cmd.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env_remove("GLIBC_TUNABLES")
-        .stdin(Stdio::null());
+    let mut cmd = common::command(program);
+    cmd.env_remove("GLIBC_TUNABLES");
     cmd
 }
 

@@ -1,26 +1,24 @@
 //! One-rank runs started side by side on one machine, as a user's scripts
 //! and this test suite start them.
 //!
-//! Without `mpirun`, Open MPI kept every such process's session files
+//! Without `mpirun`, Open MPI kept every such process's temporary files
 //! under one folder per user (`/tmp/ompi.<host>.<uid>/`); a process that
 //! ended removed it while another that started was making its own inside,
 //! and that one failed at `MPI_Init` ("A call to mkdir was unable to create
 //! the desired directory", exit 1): 4 of 240 runs, four loops side by side,
-//! twice, before each run got a session folder of its own
-//! (`SessionDir` in `src/main.rs`), none of 480 after. This test runs 64
+//! twice, before each run got a temporary folder of its own
+//! (`MpiTempDir` in `src/main.rs`), none of 480 after. This test runs 64
 //! (four loops of 16): the build before failed in 3 of 8 such rounds (7 of
 //! 512 runs), so it is a net with holes, not a proof; it also checks that
-//! every run removes its session folder, and that a folder left by a run
+//! every run removes its temporary folder, and that a folder left by a run
 //! that was killed goes at the next run.
 
 mod common;
 
-use std::process::{Command, Stdio};
-
 #[test]
 fn one_rank_runs_side_by_side_all_start() {
     let root = tempfile::tempdir().unwrap();
-    // The runs' temporary folder (their session folders go there), so
+    // The runs' temporary folder (their Open MPI folders go there), so
     // that what they leave is theirs alone.
     let tmp = root.path().join("tmp");
     std::fs::create_dir(&tmp).unwrap();
@@ -35,7 +33,7 @@ fn one_rank_runs_side_by_side_all_start() {
             std::thread::spawn(move || {
                 let mut failures = Vec::new();
                 for k in 0..16 {
-                    let o = Command::new(env!("CARGO_BIN_EXE_rigidsim"))
+                    let o = common::command(env!("CARGO_BIN_EXE_rigidsim"))
                         .arg(&scene)
                         .args([
                             "--duration",
@@ -45,10 +43,7 @@ fn one_rank_runs_side_by_side_all_start() {
                             "--out",
                         ])
                         .arg(&out)
-                        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-                        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
                         .env("TMPDIR", &tmp)
-                        .stdin(Stdio::null())
                         .output()
                         .expect("cannot start rigidsim");
                     if !o.status.success() {
@@ -64,7 +59,7 @@ fn one_rank_runs_side_by_side_all_start() {
         .collect();
     let failures: Vec<String> = loops.into_iter().flat_map(|h| h.join().unwrap()).collect();
     assert!(failures.is_empty(), "{}", failures.join("\n"));
-    // Each run removed its session folder, and the first the stale one.
+    // Each run removed its Open MPI folder, and the first the stale one.
     let left: Vec<_> = std::fs::read_dir(&tmp)
         .unwrap()
         .map(|e| e.unwrap().file_name())

@@ -87,15 +87,21 @@ pub fn bundled(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// The binary run directly, without mpirun, no standard input. `run`
-/// initialises MPI even alone, and Open MPI refuses root without these two
-/// variables.
+/// The binary run directly, without mpirun, no standard input.
 pub fn rigidsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rigidsim"))
+    command(env!("CARGO_BIN_EXE_rigidsim"))
         .args(args)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .stdin(Stdio::null())
         .output()
         .expect("cannot start rigidsim")
+}
+
+/// `program` (the binary, or a launcher of it) as the tests start it: no
+/// standard input, and Open MPI's consent to root. `run` initialises MPI
+/// even alone, and Open MPI refuses root without these two variables.
+pub fn command(program: &str) -> Command {
+    let mut cmd = Command::new(program);
+    cmd.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .stdin(Stdio::null());
+    cmd
 }
