@@ -71,6 +71,11 @@ struct RunArgs {
     /// Trajectory sampling interval in simulated seconds.
     #[arg(long)]
     sample_every: Option<f64>,
+    /// Approaches slower than this (m/s) are solved at the step by
+    /// speculative contacts; 0: every impact an exact event (overrides
+    /// world.speculative_speed; default g·dt/2).
+    #[arg(long)]
+    speculative_speed: Option<f64>,
     /// Do not render, even if the scene has a [render] section.
     #[arg(long)]
     no_render: bool,
@@ -342,6 +347,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         duration: cli.duration,
         dt: cli.dt,
         sample_every: cli.sample_every,
+        speculative_speed: cli.speculative_speed,
         no_render: cli.no_render,
         no_progress: cli.no_progress,
         no_sleep: cli.no_sleep,

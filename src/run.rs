@@ -23,6 +23,7 @@ pub struct RunOptions {
     pub duration: Option<f64>,
     pub dt: Option<f64>,
     pub sample_every: Option<f64>,
+    pub speculative_speed: Option<f64>,
     pub no_render: bool,
     pub no_progress: bool,
     pub no_sleep: bool,
@@ -52,6 +53,14 @@ pub fn apply_overrides(scene: &mut Scene, opts: &RunOptions) -> Result<(), Strin
             return Err(format!("--sample-every must be positive (got {s})"));
         }
         scene.settings.sample_every = Some(s);
+    }
+    if let Some(v) = opts.speculative_speed {
+        if !v.is_finite() || v < 0.0 {
+            return Err(format!(
+                "--speculative-speed must be a finite number ≥ 0 (got {v})"
+            ));
+        }
+        scene.settings.speculative_speed_given = Some(v);
     }
     if let Some(c) = opts.checkpoint_every {
         if !c.is_finite() || c <= 0.0 {

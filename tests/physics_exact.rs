@@ -101,9 +101,26 @@ fn bouncing_cube(e: f64, dt: f64) -> rigidsim::step::World {
 /// analytic t_k within 1e-6 s.
 #[test]
 fn bounce_heights_and_impact_times_follow_restitution() {
+    bounces_follow_restitution(0.0);
+}
+
+/// The speculative contact dial (`world.speculative_speed`) leaves an impact
+/// that stands alone exact: the same apexes and impact times at 1 m/s.
+#[test]
+fn bounces_stay_exact_with_the_speculative_dial_on() {
+    bounces_follow_restitution(1.0);
+}
+
+/// A world with the contact model's dial at `speculative_speed` (m/s).
+fn dialled(mut w: rigidsim::step::World, speculative_speed: f64) -> rigidsim::step::World {
+    w.scene.settings.speculative_speed_given = Some(speculative_speed);
+    w
+}
+
+fn bounces_follow_restitution(speculative_speed: f64) {
     let e = 0.8;
     let h0 = 1.0;
-    let mut w = bouncing_cube(e, 0.001);
+    let mut w = dialled(bouncing_cube(e, 0.001), speculative_speed);
     let mut exec = Inline::default();
     let v1 = (2.0 * G * h0).sqrt();
     // Analytic impact times: t1 = v1/g, then each flight lasts 2 e^k v1 / g.
@@ -186,7 +203,16 @@ fn row_of_cubes(velocities: &[f64], positions: &[f64]) -> rigidsim::step::World 
 
 #[test]
 fn equal_cubes_exchange_velocities_head_on() {
-    let mut w = row_of_cubes(&[1.0, -0.5], &[-0.5, 0.5]);
+    cubes_exchange_velocities(0.0);
+}
+
+#[test]
+fn cubes_exchange_velocities_with_the_speculative_dial_on() {
+    cubes_exchange_velocities(1.0);
+}
+
+fn cubes_exchange_velocities(speculative_speed: f64) {
+    let mut w = dialled(row_of_cubes(&[1.0, -0.5], &[-0.5, 0.5]), speculative_speed);
     let p0: Vector3<f64> = w.bodies.iter().map(|b| b.state.velocity).sum();
     run_until(&mut w, &mut Inline::default(), 1.0);
     let (va, vb) = (w.bodies[0].state.velocity, w.bodies[1].state.velocity);
@@ -205,8 +231,20 @@ fn equal_cubes_exchange_velocities_head_on() {
 /// (NOTES: only sequential pairwise impacts give the toy's (0, 0, v)).
 #[test]
 fn newtons_cradle_gives_the_simultaneous_lcp_answer() {
+    cradle_gives_the_simultaneous_answer(0.0);
+}
+
+#[test]
+fn newtons_cradle_stays_exact_with_the_speculative_dial_on() {
+    cradle_gives_the_simultaneous_answer(1.0);
+}
+
+fn cradle_gives_the_simultaneous_answer(speculative_speed: f64) {
     let v = 1.0;
-    let mut w = row_of_cubes(&[v, 0.0, 0.0], &[-0.3, 0.0, 0.1]);
+    let mut w = dialled(
+        row_of_cubes(&[v, 0.0, 0.0], &[-0.3, 0.0, 0.1]),
+        speculative_speed,
+    );
     let e0: f64 = 0.5 * v * v;
     run_until(&mut w, &mut Inline::default(), 1.0);
     let got: Vec<f64> = w.bodies.iter().map(|b| b.state.velocity.x).collect();

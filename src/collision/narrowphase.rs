@@ -21,6 +21,11 @@ use serde::{Deserialize, Serialize};
 /// and small enough that a resting body does not visibly float.
 pub const CONTACT_TOLERANCE: f64 = 1e-5;
 
+/// Points apart by more than this are near points, not contacts: a
+/// contact may lie up to the tolerance past the pair's closest point, which
+/// is itself within the tolerance.
+pub const NEAR_FROM: f64 = 2.0 * CONTACT_TOLERANCE;
+
 /// Contact points kept per part pair. A flat 40-sided cap on a floor gives 40
 /// points, but 8 well-spread ones carry the same support polygon, and the
 /// LCP's cost grows with the cube of its rows.
@@ -88,6 +93,10 @@ pub struct PairTask {
     pub warm: Vec<CachedFeatures>,
     /// Generate contact points for part pairs closer than this.
     pub contact_tolerance: f64,
+    /// Also give the points of part pairs apart by up to this (metres), past
+    /// the contact tolerance, as `PairResult::near`: the speculative contacts
+    /// of the next step's contact solve. At most the tolerance: none.
+    pub near_distance: f64,
 }
 
 /// Result for one body pair (collision reply).
@@ -100,6 +109,9 @@ pub struct PairResult {
     pub depth: f64,
     pub penetrating: bool,
     pub contacts: Vec<ContactPoint>,
+    /// Points apart by more than the contact tolerance and at most
+    /// `PairTask::near_distance` (empty where that is not asked for).
+    pub near: Vec<ContactPoint>,
     pub features: Vec<CachedFeatures>,
     pub iterations: u32,
     pub part_pairs_tested: u32,
@@ -126,11 +138,13 @@ pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
         ..Default::default()
     };
     let warm = WarmStarts::of(task);
-    for (ia, ib) in close_part_pairs(oa, ob, task) {
+    let reach = task.contact_tolerance.max(task.near_distance);
+    for (ia, ib) in scan_parts(oa, ob, task, reach, false).close {
         let prox = part_proximity(oa, ob, task, &warm, (ia, ib));
         add_part_pair(&mut out, oa, ob, task, ia, ib, &prox);
     }
     out.contacts = reduce_per_normal(std::mem::take(&mut out.contacts));
+    out.near = reduce_per_normal(std::mem::take(&mut out.near));
     out
 }
 
@@ -213,7 +227,7 @@ pub fn probe_apart_and_far_gap(
         &objects[task.object_a as usize],
         &objects[task.object_b as usize],
     );
-    let scan = scan_parts(oa, ob, task, true);
+    let scan = scan_parts(oa, ob, task, task.contact_tolerance, true);
     let warm = WarmStarts::of(task);
     let (mut gap, mut axis) = (f64::INFINITY, Vector3::zeros());
     for pair in scan.close {
@@ -230,7 +244,7 @@ pub fn probe_apart_and_far_gap(
 }
 
 /// A task's part pairs, sorted by their spheres: the close ones
-/// (`close_part_pairs`) and the gap of the others (`far_part_gap`).
+/// (within a reach) and the gap of the others (`far_part_gap`).
 struct PartScan {
     close: Vec<(usize, usize)>,
     far_gap: f64,
@@ -269,22 +283,28 @@ impl PlacedSpheres {
 /// root of `norm_squared`). An A part too far from all of B to lower the
 /// gap (`part_sphere_gap`'s skip) is still scanned for close pairs, unless
 /// it is further than the tolerance (plus `CLOSE_MARGIN`) from them all.
-fn scan_parts(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask, far_gap: bool) -> PartScan {
+fn scan_parts(
+    oa: &ObjectDef,
+    ob: &ObjectDef,
+    task: &PairTask,
+    within: f64,
+    far_gap: bool,
+) -> PartScan {
     let b = PlacedSpheres::of(ob, task);
-    let beyond = task.contact_tolerance;
+    let beyond = within;
     let mut close = Vec::new();
     let mut gap = f64::INFINITY;
     for (ia, pa) in oa.parts.iter().enumerate() {
         let ca = task.pose_a * Point3::from(pa.sphere.center);
         let nearest = (ca - b.origin).norm() - pa.sphere.radius - b.reach;
         let gap_skips = !far_gap || nearest >= gap;
-        let none_close = nearest > task.contact_tolerance + CLOSE_MARGIN;
+        let none_close = nearest > within + CLOSE_MARGIN;
         if gap_skips && none_close {
             continue;
         }
         for (ib, (pb, cb)) in ob.parts.iter().zip(&b.centres).enumerate() {
             let d2 = (ca - cb).norm_squared();
-            let reach = pa.sphere.radius + pb.sphere.radius + task.contact_tolerance;
+            let reach = pa.sphere.radius + pb.sphere.radius + within;
             if !none_close && d2 <= reach * reach {
                 close.push((ia, ib));
             }
@@ -346,11 +366,6 @@ pub fn part_sphere_gap(objects: &[ObjectDef], task: &PairTask, beyond: f64) -> f
 /// magnitude above the rounding of these distances (a few 1e-18 m on bodies
 /// of centimetres), so no pair the full scan would call close is left out.
 const CLOSE_MARGIN: f64 = 1e-9;
-
-/// Part pairs whose part spheres come within the contact tolerance.
-fn close_part_pairs(oa: &ObjectDef, ob: &ObjectDef, task: &PairTask) -> Vec<(usize, usize)> {
-    scan_parts(oa, ob, task, false).close
-}
 
 /// A task's cached features, looked up by part pair. `query_pair` writes
 /// them in part-pair order, so a binary search finds one; whether they are in
@@ -429,19 +444,48 @@ fn add_part_pair(
         prox.distance
     });
     out.penetrating |= prox.penetrating;
-    if prox.penetrating || prox.distance <= task.contact_tolerance {
-        let (ha, hb) = (&oa.parts[ia].hull, &ob.parts[ib].hull);
-        let points = manifold::contact_points(
-            ha,
-            &task.pose_a,
-            hb,
-            &task.pose_b,
-            prox,
-            task.contact_tolerance,
-        );
-        for p in reduce_contacts(points, MAX_POINTS_PER_PART_PAIR) {
-            out.depth = out.depth.max(-p.separation);
-            out.contacts.push(p);
+    let touching = prox.penetrating || prox.distance <= task.contact_tolerance;
+    let near = task.near_distance > task.contact_tolerance;
+    if !(touching || near && prox.distance <= task.near_distance) {
+        return;
+    }
+    let (ha, hb) = (&oa.parts[ia].hull, &ob.parts[ib].hull);
+    let tolerance = task.contact_tolerance.max(task.near_distance);
+    let points = manifold::contact_points(ha, &task.pose_a, hb, &task.pose_b, prox, tolerance);
+    let (contacts, near_points) = if near {
+        split_near(points, touching, task)
+    } else {
+        (points, Vec::new())
+    };
+    for p in reduce_contacts(contacts, MAX_POINTS_PER_PART_PAIR) {
+        out.depth = out.depth.max(-p.separation);
+        out.contacts.push(p);
+    }
+    out.near
+        .extend(reduce_contacts(near_points, MAX_POINTS_PER_PART_PAIR));
+}
+
+/// A part pair's points found within the near distance, split into its
+/// contacts (where it touches: the points within the contact tolerance of
+/// the closest, as a query within the tolerance keeps them) and its near
+/// points (apart by more than `NEAR_FROM`, for a task's own tolerance).
+fn split_near(
+    points: Vec<ContactPoint>,
+    touching: bool,
+    task: &PairTask,
+) -> (Vec<ContactPoint>, Vec<ContactPoint>) {
+    let closest = points
+        .iter()
+        .map(|p| p.separation)
+        .fold(f64::INFINITY, f64::min);
+    let (mut contacts, mut near) = (Vec::new(), Vec::new());
+    for p in points {
+        if touching && p.separation <= closest + task.contact_tolerance {
+            contacts.push(p);
+        } else if p.separation > 2.0 * task.contact_tolerance && p.separation <= task.near_distance
+        {
+            near.push(p);
         }
     }
+    (contacts, near)
 }

@@ -71,6 +71,15 @@ pub struct IslandContact {
     pub warm_friction: Vector3<f64>,
     /// How the normal turns with the bodies (for `gap_curvature`).
     pub turns: NormalTurn,
+    /// The normal speed (negative: closing) this contact approached at
+    /// when a speculative contact of its pair stopped it short in the
+    /// pair's last solve (`IslandResult::carried`), zero if none: a touching
+    /// contact's impact restitutes from it, so the bounce a speculative
+    /// contact deferred is the one the approach had.
+    pub approach: f64,
+    /// A speculative contact: a near point, apart by more than the contact
+    /// tolerance, whose gap may close to `SPECULATIVE_GAP` within the step.
+    pub near: bool,
 }
 
 /// Separating speeds below this (m/s) count as resting in the resting
@@ -96,6 +105,22 @@ const OVERLAP_RECOVERY: f64 = 0.2;
 /// Not lower: from 9 µm (e77ea07) the lift fed a bolt wobbling on its rim,
 /// and the 1000-body floor pour ran to its 60 s cap (dropped in 2f041c4).
 const OVERLAP_FIRM: f64 = 0.99 * CONTACT_TOLERANCE;
+
+/// The gap a speculative contact (one apart by more than the contact
+/// tolerance) may close to within the step: the middle of the touching band,
+/// so that what the linear prediction misses either way still ends touching.
+pub const SPECULATIVE_GAP: f64 = 0.5 * CONTACT_TOLERANCE;
+
+/// The speed (m/s) at which a speculative contact (`IslandContact::near`)
+/// may close over an interval `dt` and still end apart by
+/// `SPECULATIVE_GAP`; zero for a touching contact.
+fn closing_allowed(c: &IslandContact, dt: f64) -> f64 {
+    if c.near {
+        (c.separation - SPECULATIVE_GAP) / dt
+    } else {
+        0.0
+    }
+}
 
 /// Contact request for one system (SPEC 3.4).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -127,6 +152,11 @@ pub struct IslandResult {
     pub contact_force: Vec<f64>,
     /// Resting friction force at each contact, world frame, in task order.
     pub contact_friction: Vec<Vector3<f64>>,
+    /// Per contact in task order: where a speculative contact pushed and
+    /// its approach at the start was faster than the restitution threshold,
+    /// that approach speed (negative), for the pair's next solve to bounce
+    /// from (`IslandContact::approach`); else zero.
+    pub carried: Vec<f64>,
     pub stats: SolveStats,
 }
 
@@ -407,10 +437,12 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
     // `merge_coincident_contacts`).
     let force = std::mem::take(&mut r.contact_force);
     let friction = std::mem::take(&mut r.contact_friction);
+    let carried = std::mem::take(&mut r.carried);
     for &(k, first) in &merged.into {
         r.contact_force.push(if first { force[k] } else { 0.0 });
         r.contact_friction
             .push(if first { friction[k] } else { Vector3::zeros() });
+        r.carried.push(carried[k]);
     }
     r
 }
@@ -461,6 +493,7 @@ fn merge_coincident_contacts(task: &IslandTask) -> Option<MergedIsland> {
                 kept.separation = kept.separation.min(c.separation);
                 kept.warm_force += c.warm_force;
                 kept.warm_friction += c.warm_friction;
+                kept.approach = kept.approach.min(c.approach);
                 into.push((pair_start + k, false));
             }
             None => {
@@ -493,16 +526,27 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
     let mut w: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.angular_velocity).collect();
 
     // 1. Impact.
-    let approaching = task.contacts.iter().any(|c| {
-        let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
-        row.velocity(&v, &w) < -APPROACH_EPS
+    let start_speed: Vec<f64> = task
+        .contacts
+        .iter()
+        .map(|c| {
+            Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal).velocity(&v, &w)
+        })
+        .collect();
+    let approaching = task.contacts.iter().zip(&start_speed).any(|(c, &vn)| {
+        vn + closing_allowed(c, task.dt) < -APPROACH_EPS
+            || bounce_basis(c, vn, task) < -task.restitution_threshold
     });
+    let mut pushed = vec![false; task.contacts.len()];
     if approaching {
         let (rows, p, sum) = solve_phase(task, &v, &w, Phase::Impact, &mut out.stats);
         out.normal_impulse_sum = sum;
         for (row, &pi) in rows.iter().zip(&p) {
             apply(row, pi, &mut out.impulse, &mut out.angular_impulse);
             row.change_velocities(pi, &mut v, &mut w);
+        }
+        for (k, r) in normal_rows(task).into_iter().enumerate() {
+            pushed[k] |= p[r] > 0.0;
         }
     }
 
@@ -540,7 +584,13 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
         .collect();
     let needed = task.contacts.iter().zip(&curvature).any(|(c, k)| {
         let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
-        row.velocity(&vf, &wf) + k * task.dt < 0.0
+        let gap = closing_allowed(c, task.dt);
+        let allowed = if gap > 0.0 {
+            row.velocity(&v, &w) + 2.0 * gap
+        } else {
+            0.0
+        };
+        row.velocity(&vf, &wf) + allowed + k * task.dt < 0.0
     });
     if needed {
         let (rows, p, sum) = solve_phase(
@@ -565,12 +615,60 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
         for (row, &pi) in rows.iter().zip(&p) {
             apply(row, pi / task.dt, &mut out.force, &mut out.torque);
         }
+        for (k, r) in normal_rows(task).into_iter().enumerate() {
+            pushed[k] |= p[r] > 0.0;
+        }
     } else {
         out.stats.skipped_solves += 1;
         out.contact_force = vec![0.0; task.contacts.len()];
         out.contact_friction = vec![Vector3::zeros(); task.contacts.len()];
     }
+    out.carried = task
+        .contacts
+        .iter()
+        .zip(&start_speed)
+        .zip(&pushed)
+        .map(|((c, &vn), &pushed)| {
+            if pushed && closing_allowed(c, task.dt) > 0.0 {
+                meeting_speed(task, c, vn)
+            } else {
+                0.0
+            }
+        })
+        .map(|v| {
+            if v < -task.restitution_threshold {
+                v
+            } else {
+                0.0
+            }
+        })
+        .collect();
     out
+}
+
+/// The normal speed at which a speculative contact's gap, closing at `vn`
+/// under the external forces' acceleration alone, would have closed to
+/// `SPECULATIVE_GAP`: the approach its deferred bounce restitutes from.
+fn meeting_speed(task: &IslandTask, c: &IslandContact, vn: f64) -> f64 {
+    let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
+    let dv: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.external_dv).collect();
+    let dw: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.external_dw).collect();
+    let closing_accel = (-row.velocity(&dv, &dw) / task.dt).max(0.0);
+    let gap = (c.separation - SPECULATIVE_GAP).max(0.0);
+    -(vn * vn + 2.0 * closing_accel * gap).sqrt()
+}
+
+/// The normal speed a touching contact's impact restitutes from: its own
+/// `vn`, or the approach a speculative contact deferred (`approach`) where
+/// that was faster. Speculative contacts do not bounce.
+fn bounce_basis(c: &IslandContact, vn: f64, task: &IslandTask) -> f64 {
+    if closing_allowed(c, task.dt) > 0.0 {
+        0.0
+    } else if c.approach < 0.0 && c.approach < vn {
+        c.approach
+    } else {
+        vn
+    }
 }
 
 /// Index of each contact's normal row in the row list `solve_phase` builds.
@@ -670,13 +768,30 @@ fn solve_phase(
     // Each row's coefficient of restitution where the impact applies one.
     let mut restitution = Vec::with_capacity(most);
     let resting = matches!(phase, Phase::Resting { .. });
+    let mut deferred = 0.0;
     for (ci, c) in task.contacts.iter().enumerate() {
         let (a, b) = (c.a as usize, c.b as usize);
         let normal = Row::new(&task.bodies, a, b, &c.point, c.normal);
         let vn = normal.velocity(v, w);
+        let speculative = closing_allowed(c, task.dt);
+        let basis = bounce_basis(c, vn, task);
         let b_n = match phase {
-            Phase::Impact if vn < -task.restitution_threshold => (1.0 + c.restitution) * vn,
+            // A speculative contact: the gap may close to `SPECULATIVE_GAP`
+            // at the speed it starts with (no restitution: its approach is
+            // slower than the speculative speed, `step::contact`).
+            Phase::Impact if speculative > 0.0 => vn + speculative,
+            // Newton's law from the approach, its own or the deferred one.
+            Phase::Impact if basis < vn && basis < -task.restitution_threshold => {
+                vn + c.restitution * basis
+            }
+            Phase::Impact if basis < -task.restitution_threshold => (1.0 + c.restitution) * vn,
             Phase::Impact => vn,
+            // Over the step its gap changes by h (u + v')/2, u its speed
+            // after the impact phase: it may end closed to the same gap.
+            Phase::Resting { start, curvature } if speculative > 0.0 => {
+                let u = normal.velocity(start.0, start.1);
+                vn + u + 2.0 * speculative + curvature[ci] * task.dt
+            }
             // w = v' − u ≥ 0 asks for a separating speed u that mends overlap.
             // A contact already separating at the step's start (speed u > 0)
             // may end it closing at up to u: over the step its gap changes
@@ -697,8 +812,17 @@ fn solve_phase(
             Phase::Resting { curvature, .. } => curvature[ci] * task.dt,
             Phase::Impact => 0.0,
         });
+        // The energy a deferred approach lost at its speculative contact,
+        // which its bounce may give back (`energy_guard`).
+        if matches!(phase, Phase::Impact) && basis < vn.min(0.0) {
+            let a_nn = normal.coupling(&normal);
+            if a_nn > 0.0 {
+                deferred += 0.5 * (basis * basis - vn.min(0.0).powi(2)) / a_nn;
+            }
+        }
         restitution.push(match phase {
-            Phase::Impact if vn < -task.restitution_threshold => c.restitution,
+            Phase::Impact if speculative > 0.0 => 0.0,
+            Phase::Impact if basis < -task.restitution_threshold => c.restitution,
             _ => 0.0,
         });
         let ni = rows.len();
@@ -788,7 +912,7 @@ fn solve_phase(
     // point's): its violation noted, the energy guard's iterative check.
     let keep = |p: Vec<f64>, stats: &mut SolveStats| {
         note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
-        let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias), p, stats);
+        let p = guard_iterative(&diag, &rows, &findex, (v, w, &bias, deferred), p, stats);
         let sum = normal_sum(&p);
         (p, sum)
     };
@@ -973,7 +1097,7 @@ fn solve_phase(
         }
     };
     note_violation(&rows, &rhs, &lo, &hi, &findex, &p, v.len(), stats);
-    let p = energy_guard(&diag, &rows, (v, w, &bias), p, stats, |vel| {
+    let p = energy_guard(&diag, &rows, (v, w, &bias, deferred), p, stats, |vel| {
         safe_answers(&a, m, vel, &lo, &hi, &findex, &restitution)
     });
     let sum = normal_sum(&p);
@@ -1130,9 +1254,9 @@ fn guard_iterative(
     })
 }
 
-/// The body velocities a solve acts on, and each row's bias (see
-/// `energy_guard`).
-type Velocities<'a> = (&'a [Vector3<f64>], &'a [Vector3<f64>], &'a [f64]);
+/// The body velocities a solve acts on, each row's bias, and the kinetic
+/// energy (J) deferred bounces may give back (see `energy_guard`).
+type Velocities<'a> = (&'a [Vector3<f64>], &'a [Vector3<f64>], &'a [f64], f64);
 
 /// Compliance added to the diagonal of a contact system the exact solve
 /// failed on, relative to its largest diagonal entry. Redundant contacts (a
@@ -1178,11 +1302,13 @@ const ENERGY_GAIN_ALLOWED: f64 = 0.01;
 /// A row's `bias` (the gap's curvature over the interval, `gap_curvature`)
 /// counts as velocity it already has: an impulse that holds a curving gap
 /// open does no work on the real motion, though the linear prediction of
-/// the velocities says it does.
+/// the velocities says it does. A bounce a speculative contact deferred
+/// (`IslandContact::approach`) gives back at most the energy its approach
+/// lost then, `deferred`, which is allowed on top.
 fn energy_guard(
     diag: &[f64],
     rows: &[Row],
-    (v, w, bias): Velocities,
+    (v, w, bias, deferred): Velocities,
     p: Vec<f64>,
     stats: &mut SolveStats,
     safe_solves: impl FnOnce(&[f64]) -> Vec<(&'static str, Vec<f64>)>,
@@ -1212,7 +1338,7 @@ fn energy_guard(
         .filter(|&i| diag[i] > 0.0)
         .map(|i| 0.5 * vel[i] * vel[i] / diag[i])
         .sum();
-    let allowed = |x: &[f64]| gain(x) <= ENERGY_GAIN_ALLOWED * scale + 1e-12;
+    let allowed = |x: &[f64]| gain(x) <= ENERGY_GAIN_ALLOWED * scale + deferred + 1e-12;
     if allowed(&p) {
         return p;
     }
@@ -1926,6 +2052,8 @@ mod tests {
                     warm_force: 0.0,
                     warm_friction: Vector3::zeros(),
                     turns: NormalTurn::WithB,
+                    approach: 0.0,
+                    near: false,
                 });
             }
         }
@@ -2112,6 +2240,8 @@ mod tests {
             warm_force: 0.0,
             warm_friction: Vector3::zeros(),
             turns: NormalTurn::WithB,
+            approach: 0.0,
+            near: false,
         };
         let corners = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)];
         let deeper = |k: usize| if k < 2 { -2e-6 } else { 0.0 };
@@ -2198,7 +2328,7 @@ mod tests {
         let mut stats = SolveStats::default();
         let diag: Vec<f64> = (0..m).map(|i| a[i * m + i]).collect();
         let unbiased = [0.0; 2];
-        let velocities = (&v[..], &w[..], &unbiased[..]);
+        let velocities = (&v[..], &w[..], &unbiased[..], 0.0);
         let p = energy_guard(
             &diag,
             &rows,
@@ -2255,6 +2385,8 @@ mod tests {
                     warm_force: 0.0,
                     warm_friction: Vector3::zeros(),
                     turns: NormalTurn::WithB,
+                    approach: 0.0,
+                    near: false,
                 }],
                 dt: 0.01,
                 restitution_threshold: 0.05,
@@ -2300,5 +2432,96 @@ mod tests {
         let w = b.inv_inertia * r.angular_impulse[1];
         let vn = (b.velocity + pe * b.inv_mass + w.cross(&-b.position)).z;
         assert!(vn > 0.5, "the end leaves at {vn} m/s");
+    }
+
+    /// A 1 kg point-like body above a fixed floor, one frictionless contact
+    /// `separation` below it, moving down at `speed` under gravity (1 s
+    /// steps of 0.01 s): the island of a speculative or touching contact.
+    fn falling_on_floor(separation: f64, speed: f64, near: bool, approach: f64) -> IslandTask {
+        let g = 9.81;
+        let h = 0.01;
+        let floor = fixed_body(Vector3::new(0.0, 0.0, -1.0));
+        let body = IslandBody {
+            id: BodyId(1),
+            inv_mass: 1.0,
+            inv_inertia: Matrix3::identity(),
+            position: Vector3::new(0.0, 0.0, 0.1 + separation),
+            velocity: Vector3::new(0.0, 0.0, -speed),
+            external_dv: Vector3::new(0.0, 0.0, -g * h),
+            ..floor.clone()
+        };
+        IslandTask {
+            bodies: vec![floor, body],
+            contacts: vec![IslandContact {
+                a: 1,
+                b: 0,
+                point: Vector3::new(0.0, 0.0, separation / 2.0),
+                normal: Vector3::z(),
+                restitution: 0.5,
+                friction: 0.0,
+                separation,
+                warm_force: 0.0,
+                warm_friction: Vector3::zeros(),
+                turns: NormalTurn::WithB,
+                approach,
+                near,
+            }],
+            dt: h,
+            restitution_threshold: 0.5 * g * h,
+            iterative_min_rows: 300,
+        }
+    }
+
+    /// The body's velocity after the impact phase (u) and at the step's end
+    /// (v'), and the gap at the end: separation + h (u + v')/2.
+    fn after_step(t: &IslandTask, r: &IslandResult) -> (f64, f64, f64) {
+        let b = &t.bodies[1];
+        let u = b.velocity.z + r.impulse[1].z * b.inv_mass;
+        let end = u + b.external_dv.z + r.force[1].z * t.dt * b.inv_mass;
+        let gap = t.contacts[0].separation + t.dt * (u + end) / 2.0;
+        (u, end, gap)
+    }
+
+    /// A speculative contact 50 µm below a body approaching at 3 cm/s
+    /// (it would close 0.79 mm in the step): the gap closes exactly to
+    /// `SPECULATIVE_GAP`, with no bounce, and nothing is carried (it would
+    /// meet the floor at 4.2 cm/s, below the restitution threshold).
+    #[test]
+    fn speculative_contact_closes_the_gap_to_its_target_without_a_bounce() {
+        let t = falling_on_floor(5e-5, 0.03, true, 0.0);
+        let r = solve_island(&t);
+        let (u, end, gap) = after_step(&t, &r);
+        assert!((gap - SPECULATIVE_GAP).abs() < 1e-15, "gap {gap:e}");
+        assert!(u <= 0.0 && end <= 0.0, "bounced: {u} then {end} m/s");
+        assert_eq!(r.carried, vec![0.0]);
+        // Far enough that the step cannot close it: no force at all.
+        let far = falling_on_floor(2e-3, 0.03, true, 0.0);
+        let r = solve_island(&far);
+        assert_eq!((r.impulse[1].z, r.force[1].z), (0.0, 0.0));
+    }
+
+    /// An approach at 1 m/s stopped 0.5 mm short by a speculative contact
+    /// is carried (at the speed it would have met the floor with); the next
+    /// step's touching contact bounces at e times it, exactly as Newton's
+    /// law from the original approach, and
+    /// the energy guard lets that rebound through (it gives back no more
+    /// than the stop took).
+    #[test]
+    fn a_deferred_approach_bounces_at_the_step_where_the_bodies_meet() {
+        let stop = falling_on_floor(5e-4, 1.0, true, 0.0);
+        let r = solve_island(&stop);
+        let (u, _, gap) = after_step(&stop, &r);
+        assert!((gap - SPECULATIVE_GAP).abs() < 1e-15, "gap {gap:e}");
+        // 1 m/s at the start, gravity's 9.81 m/s² over the 0.495 mm closed.
+        let meeting = -(1.0f64 + 2.0 * 9.81 * (5e-4 - SPECULATIVE_GAP)).sqrt();
+        assert_eq!(r.carried, vec![meeting]);
+        // Next step: touching, closing at what the stop left (u plus
+        // gravity's step), the carried approach deciding the bounce.
+        let meet = falling_on_floor(SPECULATIVE_GAP, -(u - 9.81 * 0.01), false, r.carried[0]);
+        let r = solve_island(&meet);
+        assert_eq!(r.stats.failed, 0, "{:?}", r.stats.failures);
+        let (u, _, _) = after_step(&meet, &r);
+        assert!((u + 0.5 * meeting).abs() < 1e-12, "rebound {u} m/s");
+        assert_eq!(r.carried, vec![0.0]);
     }
 }

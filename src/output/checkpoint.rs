@@ -51,7 +51,7 @@ pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// `largest_rows`, `large_systems`). 10: the solver's worst violation
 /// (`SolveStats::worst_violation`). 11: the interior-point solves
 /// (`SolveStats::interior_solves`, `interior_steps`, `interior_missed`).
-pub const FORMAT: u32 = 11;
+pub const FORMAT: u32 = 12;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";
@@ -88,6 +88,10 @@ pub struct Checkpoint {
     /// `scene_fingerprint` of the scene the run was started with.
     pub scene_fingerprint: u64,
     pub dt: f64,
+    /// The contact model's dial (`Settings::speculative_speed`,
+    /// `Settings::pile_bodies`) the run stepped with.
+    pub speculative_speed: f64,
+    pub pile_bodies: u32,
     pub steps: u64,
     pub bodies: Vec<Body>,
     pub counters: Counters,
@@ -169,6 +173,8 @@ impl World {
             scene_path: self.scene.path.clone(),
             scene_fingerprint: scene_fingerprint(&self.scene),
             dt: self.scene.settings.dt,
+            speculative_speed: self.scene.settings.speculative_speed(),
+            pile_bodies: self.scene.settings.pile_bodies,
             steps: self.steps,
             bodies: self.bodies.clone(),
             counters: self.counters.clone(),
@@ -239,6 +245,16 @@ impl Checkpoint {
 
     /// Refuses a scene other than the one the checkpoint was written for.
     pub fn check_scene(&self, scene: &Scene) -> Result<(), CheckpointError> {
+        let s = &scene.settings;
+        let dial = (s.speculative_speed(), s.pile_bodies);
+        if dial != (self.speculative_speed, self.pile_bodies) {
+            return Err(self.fail(format!(
+                "was written with world.speculative_speed {} m/s and world.pile_bodies {}, \
+                 not {} m/s and {}: resume with the contact model it was written with \
+                 (the scene's settings or --speculative-speed)",
+                self.speculative_speed, self.pile_bodies, dial.0, dial.1
+            )));
+        }
         let here = scene_fingerprint(scene);
         if here == self.scene_fingerprint {
             return Ok(());

@@ -14,7 +14,7 @@ use crate::body::mass::{MomentSum, check_inertia, principal_axes};
 use crate::body::{
     Activity, Body, BodyId, BodyKind, BodyState, BoundingSphere, ObjectDef, ObjectId, Part,
 };
-use crate::collision::narrowphase::CONTACT_TOLERANCE;
+use crate::collision::narrowphase::{CONTACT_TOLERANCE, NEAR_FROM};
 use crate::collision::polyhedron::{ConvexPolyhedron, Face};
 use crate::math;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
@@ -46,6 +46,17 @@ pub struct RenderSettings {
     pub video_fps: f64,
 }
 
+/// `world.speculative_speed` where a scene does not give it (m/s): 0, the
+/// exact model. The speculative contacts add more rows to a pile's islands
+/// than the events they remove save (`docs/benchmarks.md`, *The contact
+/// model's dial*), so they are asked for, not assumed.
+pub const DEFAULT_SPECULATIVE_SPEED: f64 = 0.0;
+
+/// `world.pile_bodies` where a scene does not give it: an approach whose two
+/// bodies' contact islands hold this many moving bodies together is inside a
+/// pile; fewer (a cube on the floor, the cradle, two cubes) stay exact events.
+pub const DEFAULT_PILE_BODIES: u32 = 8;
+
 #[derive(Clone, Debug)]
 pub struct Settings {
     pub gravity: Vector3<f64>,
@@ -60,6 +71,11 @@ pub struct Settings {
     pub frame_interval: f64,
     pub restitution_rule: CombineRule,
     pub friction_rule: CombineRule,
+    /// `world.speculative_speed` as given (or `--speculative-speed`);
+    /// `None`: the default, `speculative_speed()`.
+    pub speculative_speed_given: Option<f64>,
+    /// `world.pile_bodies` (`DEFAULT_PILE_BODIES` where absent).
+    pub pile_bodies: u32,
     /// Trajectory sampling interval; `None` samples every step.
     pub sample_every: Option<f64>,
     pub render: Option<RenderSettings>,
@@ -69,6 +85,41 @@ impl Settings {
     /// Simulated time at which the run stops at the latest.
     pub fn end_time(&self) -> f64 {
         self.duration.unwrap_or(self.max_duration)
+    }
+
+    /// The dial from exact to fast: approaches up to this speed (m/s)
+    /// inside a pile (`pile_bodies`) are solved at the step by speculative
+    /// contacts, their bounce carried to the step where the bodies meet; 0:
+    /// every impact is an exact event (the exact model).
+    pub fn speculative_speed(&self) -> f64 {
+        self.speculative_speed_given
+            .unwrap_or(DEFAULT_SPECULATIVE_SPEED)
+    }
+
+    /// Approaches up to this speed are solved at the step wherever they
+    /// are: below the restitution threshold an impact does not bounce, so
+    /// nothing of it is lost (none in the exact model).
+    pub fn slow_speed(&self) -> f64 {
+        self.speculative_speed().min(self.restitution_threshold())
+    }
+
+    /// Impacts slower than this converge to contact (ε = 0): g·dt/2, the
+    /// thesis's threshold (SPEC 2.6).
+    pub fn restitution_threshold(&self) -> f64 {
+        0.5 * self.gravity.norm() * self.dt
+    }
+
+    /// How far apart contact points are kept as speculative contacts: what
+    /// an approach at the faster of the two speeds, under twice gravity's
+    /// acceleration, closes in a step, past `NEAR_FROM`. 0 (none) in the
+    /// exact model.
+    pub fn near_distance(&self) -> f64 {
+        let v = self.speculative_speed().max(self.slow_speed());
+        if v > 0.0 {
+            v * self.dt + self.gravity.norm() * self.dt * self.dt + NEAR_FROM
+        } else {
+            0.0
+        }
     }
 
     /// Steps to the end time (saturating at `u64::MAX`); a run takes them
@@ -376,6 +427,14 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
     }
     shapes::positive(w.frame_interval, "world.frame_interval")?;
     shapes::positive(w.max_duration, "world.max_duration")?;
+    if let Some(v) = w.speculative_speed
+        && (!v.is_finite() || v < 0.0)
+    {
+        return Err((
+            "world.speculative_speed".into(),
+            format!("must be a finite number ≥ 0 m/s (got {v})"),
+        ));
+    }
     if let Some(z) = w.fall_z {
         shapes::finite_all(&[z], "world.fall_z")?;
     }
@@ -446,6 +505,8 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
         frame_interval: w.frame_interval,
         restitution_rule: w.restitution_rule,
         friction_rule: w.friction_rule,
+        speculative_speed_given: w.speculative_speed,
+        pile_bodies: w.pile_bodies.unwrap_or(DEFAULT_PILE_BODIES),
         sample_every: file.output.sample_every,
         render,
     };

@@ -58,6 +58,7 @@ pub(super) fn first_overlap(bodies: &[Body], objects: &[ObjectDef]) -> Option<St
             pose_b: bodies[b].pose(),
             warm: Vec::new(),
             contact_tolerance: CONTACT_TOLERANCE,
+            near_distance: 0.0,
         };
         let r = narrowphase::query_pair(objects, &task);
         if r.needs_rollback(CONTACT_TOLERANCE) {

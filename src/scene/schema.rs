@@ -50,6 +50,15 @@ pub struct WorldSection {
     pub restitution_rule: CombineRule,
     #[serde(default)]
     pub friction_rule: CombineRule,
+    /// Approaches inside a pile up to this speed (m/s) are solved at the
+    /// step by speculative contacts; 0 makes every impact an exact event
+    /// (`Settings::speculative_speed`).
+    #[serde(default)]
+    pub speculative_speed: Option<f64>,
+    /// Moving bodies in the two contact islands of an approach from which
+    /// it is inside a pile (`Settings::pile_bodies`).
+    #[serde(default)]
+    pub pile_bodies: Option<u32>,
 }
 
 impl Default for WorldSection {
@@ -64,6 +73,8 @@ impl Default for WorldSection {
             frame_interval: default_frame_interval(),
             restitution_rule: CombineRule::Min,
             friction_rule: CombineRule::Min,
+            speculative_speed: None,
+            pile_bodies: None,
         }
     }
 }

@@ -10,7 +10,7 @@ use super::region::{Region, Segment, pose};
 use crate::body::BodyId;
 use crate::collision::manifold::ContactPoint;
 use crate::contact::island;
-use crate::contact::solver::{IslandBody, IslandContact, IslandTask};
+use crate::contact::solver::{IslandBody, IslandContact, IslandTask, SPECULATIVE_GAP};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -120,12 +120,24 @@ pub const SPIN_TRUST: f64 = 0.05;
 /// interval between two is dt divided by this).
 pub const MAX_SPIN_RESOLVES_PER_STEP: f64 = 8.0;
 
-/// Contacts of one touching body pair at the current time.
+/// Contacts of one touching body pair at the current time, and its points
+/// apart by more than the contact tolerance but near enough to close within
+/// a step at the speculative speed (`Settings::near_distance`): the
+/// speculative contacts of the contact solve. A pair may have only those.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) struct Touching {
     pub(crate) a: BodyId,
     pub(crate) b: BodyId,
     pub(crate) points: Vec<ContactPoint>,
+    pub(crate) near: Vec<ContactPoint>,
+}
+
+impl Touching {
+    /// Whether the pair touches (within the contact tolerance), not only
+    /// comes near: what wakes, sleeps and groups bodies together.
+    pub(crate) fn touches(&self) -> bool {
+        !self.points.is_empty()
+    }
 }
 
 /// The resting force one contact point held in the last solve of its pair:
@@ -136,6 +148,8 @@ pub(crate) struct WarmContact {
     pub(crate) local: Vector3<f64>,
     pub(crate) normal: f64,
     pub(crate) friction: Vector3<f64>,
+    /// The approach a speculative contact here deferred (`IslandResult::carried`).
+    pub(crate) approach: f64,
 }
 
 /// A contact point of an island task: its body pair and where it is in A's
@@ -161,7 +175,20 @@ impl Region<'_> {
     ) -> Solved {
         let clock = Instant::now();
         let n = self.bodies.len();
-        let links: Vec<(BodyId, BodyId)> = touching.iter().map(|t| (t.a, t.b)).collect();
+        let piles = PileSizes::of(self, touching, members);
+        let points: Vec<Vec<ContactPoint>> = touching
+            .iter()
+            .map(|t| self.solved_points(t, seg, &piles, h))
+            .collect();
+        let links: Vec<(BodyId, BodyId)> = touching
+            .iter()
+            .zip(&points)
+            .filter(|(_, p)| !p.is_empty())
+            .map(|(t, _)| (t.a, t.b))
+            .collect();
+        let touching_index: Vec<usize> = (0..touching.len())
+            .filter(|&k| !points[k].is_empty())
+            .collect();
         let islands = island::build_islands(n, &links, |b| {
             let i = b.index();
             self.bodies[i].is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok()
@@ -177,6 +204,7 @@ impl Region<'_> {
             let mut index: Vec<BodyId> = bodies.clone();
             let mut contacts = Vec::new();
             for &ci in contact_ids {
+                let ci = touching_index[ci];
                 let t = &touching[ci];
                 for id in [t.a, t.b] {
                     if !index.contains(&id) {
@@ -194,7 +222,7 @@ impl Region<'_> {
                     Vec::new()
                 };
                 let reach = WARM_MATCH * oa.outer_radius();
-                for p in &t.points {
+                for (k, p) in points[ci].iter().enumerate() {
                     let local = frame_a.transform_point(&p.point.into()).coords;
                     // Each point of the last solve warms one new point at most.
                     let nearest = last
@@ -204,8 +232,10 @@ impl Region<'_> {
                         .filter(|&(_, d)| d <= reach)
                         .min_by(|x, y| x.1.total_cmp(&y.1))
                         .map(|(k, _)| last.swap_remove(k));
-                    let (warm_force, warm_friction) =
-                        nearest.map_or((0.0, Vector3::zeros()), |w| (w.normal, w.friction));
+                    let (warm_force, warm_friction, approach) = nearest
+                        .map_or((0.0, Vector3::zeros(), 0.0), |w| {
+                            (w.normal, w.friction, w.approach)
+                        });
                     pairs_here.push(((t.a, t.b), local));
                     contacts.push(IslandContact {
                         a: ia,
@@ -215,11 +245,20 @@ impl Region<'_> {
                         restitution: rules
                             .restitution_rule
                             .combine(oa.restitution, ob.restitution),
-                        friction: rules.friction_rule.combine(oa.friction, ob.friction),
+                        // A speculative contact is frictionless: it pushes only where
+                        // the gap would close past its target, and its friction rows
+                        // would triple a pile's rows for a push that lasts a step.
+                        friction: if k < t.points.len() {
+                            rules.friction_rule.combine(oa.friction, ob.friction)
+                        } else {
+                            0.0
+                        },
                         separation: p.separation,
                         warm_force,
                         warm_friction,
                         turns: p.turns,
+                        approach,
+                        near: k >= t.points.len(),
                     });
                 }
             }
@@ -284,14 +323,18 @@ impl Region<'_> {
             for (pair, _) in pairs {
                 self.warm.remove(pair);
             }
-            for (((pair, local), f), friction) in
-                pairs.iter().zip(&r.contact_force).zip(&r.contact_friction)
+            for ((((pair, local), f), friction), approach) in pairs
+                .iter()
+                .zip(&r.contact_force)
+                .zip(&r.contact_friction)
+                .zip(&r.carried)
             {
                 *pair_forces.entry(*pair).or_default() += f;
                 self.warm.entry(*pair).or_default().push(WarmContact {
                     local: *local,
                     normal: *f,
                     friction: *friction,
+                    approach: *approach,
                 });
             }
         }
@@ -338,6 +381,89 @@ impl Region<'_> {
             .map(|(bodies, _)| bodies.iter().map(|b| b.index()).collect())
             .collect();
         Solved { together, spinning }
+    }
+}
+
+/// The moving bodies of each contact island of the touching pairs, to tell
+/// an approach inside a pile from one that stands alone
+/// (`Settings::pile_bodies`).
+struct PileSizes {
+    /// Each body's island (a union–find root), if it takes part in islands.
+    island: Vec<Option<u32>>,
+    /// Moving bodies per island, by root.
+    size: Vec<u32>,
+}
+
+impl PileSizes {
+    fn of(w: &Region, touching: &[Touching], members: &[usize]) -> Self {
+        let n = w.bodies.len();
+        let joins =
+            |i: usize| w.bodies[i].is_dynamic() && w.moving(i) && members.binary_search(&i).is_ok();
+        let mut sets = island::DisjointSets::new(n);
+        for t in touching.iter().filter(|t| t.touches()) {
+            if joins(t.a.index()) && joins(t.b.index()) {
+                sets.union(t.a.0, t.b.0);
+            }
+        }
+        let island: Vec<Option<u32>> = (0..n)
+            .map(|i| joins(i).then(|| sets.find(i as u32)))
+            .collect();
+        let mut size = vec![0u32; n];
+        for r in island.iter().flatten() {
+            size[*r as usize] += 1;
+        }
+        PileSizes { island, size }
+    }
+
+    /// Moving bodies in the islands of `a` and `b` together.
+    fn pair_size(&self, a: BodyId, b: BodyId) -> u32 {
+        match (self.island[a.index()], self.island[b.index()]) {
+            (Some(ra), Some(rb)) if ra == rb => self.size[ra as usize],
+            (ra, rb) => [ra, rb]
+                .into_iter()
+                .flatten()
+                .map(|r| self.size[r as usize])
+                .sum(),
+        }
+    }
+}
+
+impl Region<'_> {
+    /// A pair's points for its contact solve over the interval `h`: its
+    /// contacts, and those of its near points that may close within the
+    /// interval and approach no faster than the speculative speed there
+    /// (`Settings::slow_speed` anywhere, `speculative_speed` inside a
+    /// pile). A faster approach is left to an exact impact event.
+    fn solved_points(
+        &self,
+        t: &Touching,
+        seg: &[Segment],
+        piles: &PileSizes,
+        h: f64,
+    ) -> Vec<ContactPoint> {
+        let mut points = t.points.clone();
+        if t.near.is_empty() {
+            return points;
+        }
+        let settings = self.st.settings;
+        let in_pile = piles.pair_size(t.a, t.b) >= settings.pile_bodies;
+        let limit = if in_pile {
+            settings.speculative_speed().max(settings.slow_speed())
+        } else {
+            settings.slow_speed()
+        };
+        let reach = settings.gravity.norm() * h;
+        let velocity_at = |i: usize, p: &Vector3<f64>| {
+            self.body_at(i, seg[i].state)
+                .point_velocity(self.object(i), p)
+        };
+        points.extend(t.near.iter().filter(|p| {
+            let v = velocity_at(t.a.index(), &p.point) - velocity_at(t.b.index(), &p.point);
+            let vn = p.normal.dot(&v);
+            let may_close = p.separation - SPECULATIVE_GAP < (reach - vn) * h;
+            vn >= -limit && may_close
+        }));
+        points
     }
 }
 

@@ -51,7 +51,11 @@ pub(super) fn step_world(
         separating: solved.separating,
         together: solved.together,
         spin_resolves: solved.spin_resolves,
-        touching: start_touching.iter().map(|t| (t.a.0, t.b.0)).collect(),
+        touching: start_touching
+            .iter()
+            .filter(|t| t.touches())
+            .map(|t| (t.a.0, t.b.0))
+            .collect(),
         body_cost: std::mem::take(&mut work.body_cost),
     };
     let done = group::step_groups(w.st, w, &start, exec)?;

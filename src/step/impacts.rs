@@ -433,6 +433,8 @@ pub(crate) fn step_group(
             for &i in &own {
                 events_of[i] += 1;
             }
+            let speed = approach_speed(&g, pair, &group_states, &group_pairs, &at_tau, &seg);
+            g.counters.toi_events_by_approach[approach_band(speed, g.st.settings)] += 1;
         }
         let rolled: Vec<usize> = group_states.iter().map(|&(i, _)| i).collect();
         // Roll the bodies back to τ; a path that had already left its
@@ -527,4 +529,50 @@ pub(crate) fn step_group(
         busy_s: 0.0,
         prepared_tasks,
     })
+}
+
+/// How fast a pair approaches at its impact: the fastest closing speed of
+/// its contact points at τ (`states` are the rolled-back bodies' states
+/// there; a body not among them keeps its segment's), zero if none closes.
+fn approach_speed(
+    g: &Region,
+    pair: PairKey,
+    states: &[(usize, BodyState)],
+    pairs: &[PairKey],
+    results: &[PairResult],
+    seg: &[Segment],
+) -> f64 {
+    let state_of = |i: usize| {
+        states
+            .iter()
+            .find(|(j, _)| *j == i)
+            .map_or(seg[i].state, |(_, s)| *s)
+    };
+    let velocity_at =
+        |i: usize, p: &Vector3<f64>| g.body_at(i, state_of(i)).point_velocity(g.object(i), p);
+    let Some(k) = pairs.iter().position(|&q| q == pair) else {
+        return 0.0;
+    };
+    let (a, b) = (pair.0 as usize, pair.1 as usize);
+    results[k]
+        .contacts
+        .iter()
+        .map(|c| {
+            -c.normal
+                .dot(&(velocity_at(a, &c.point) - velocity_at(b, &c.point)))
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The band of `Counters::toi_events_by_approach` an approach falls in.
+fn approach_band(speed: f64, settings: &crate::scene::Settings) -> usize {
+    if speed < settings.restitution_threshold() {
+        0
+    } else if speed < 0.2 {
+        1
+    } else if speed < 1.0 {
+        2
+    } else {
+        3
+    }
 }

@@ -40,7 +40,7 @@ impl Region<'_> {
         t0: f64,
     ) -> Vec<usize> {
         let mut woken = Vec::new();
-        for t in touching {
+        for t in touching.iter().filter(|t| t.touches()) {
             for id in [t.a, t.b] {
                 let i = id.index();
                 if self.bodies[i].activity == Activity::Sleeping {
@@ -64,6 +64,7 @@ impl Region<'_> {
     pub(crate) fn wake_touched_at_end(&mut self, touching: &[Touching]) {
         let groups: Vec<u32> = touching
             .iter()
+            .filter(|t| t.touches())
             .flat_map(|t| {
                 let (a, b) = (t.a.index(), t.b.index());
                 let mut g = Vec::new();
@@ -127,7 +128,11 @@ impl Region<'_> {
             }
         }
         // A system sleeps only as a whole, and never while it touches a moving driven body.
-        let links: Vec<(BodyId, BodyId)> = touching.iter().map(|t| (t.a, t.b)).collect();
+        let links: Vec<(BodyId, BodyId)> = touching
+            .iter()
+            .filter(|t| t.touches())
+            .map(|t| (t.a, t.b))
+            .collect();
         let mut sets = island::DisjointSets::new(n);
         let mut blocked = vec![false; n];
         for &(a, b) in &links {

@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# The contact model's dial (`world.speculative_speed`, `--speculative-speed`)
+# on the pours of scripts/bench_pour.sh, one rank, --no-render: for each
+# setting, run time against error (deepest overlap, the LCP's worst
+# violation, energy at the end, when the pour came to rest) and what the
+# step did (impact events by approach speed, contact rows). One sitting,
+# settings interleaved per pour; a table on standard output and in
+# bench/results/<machine>/dial.md (BENCH_MACHINE, default <host>-<cores>cpu).
+#
+# Usage: scripts/bench_dial.sh [--tiny]        (or TINY=1)
+# Knobs: DIALS="0 0.049 1.0" (m/s) POURS="200 1000" BIG_DURATION=1.5
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source scripts/setup.sh
+
+tiny=${TINY:-0}
+[ "${1:-}" = "--tiny" ] && tiny=1
+machine=${BENCH_MACHINE:-$(hostname)-$(nproc)cpu}
+DIALS=${DIALS:-"0 0.049 1.0"}
+BIG_DURATION=${BIG_DURATION:-1.5}
+if [ "$tiny" = 1 ]; then
+  POURS="20"; out=${OUT:-target/bench-tiny/$machine}; opts=(--duration 0.2)
+else
+  POURS=${POURS:-"200 1000"}; out=${OUT:-bench/results/$machine}; opts=()
+fi
+
+cargo build --release --quiet
+bin="${CARGO_TARGET_DIR:-target}"/release/rigidsim
+mkdir -p "$out"
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+source scripts/crowd.sh
+rows=()
+for count in $POURS; do
+  crowd_of "$count" >"$tmp/crowd$count.toml"
+  run_opts=("${opts[@]}")
+  [ "$count" -ge 1000 ] && run_opts=(--duration "$BIG_DURATION")
+  for dial in $DIALS; do
+    dir=$tmp/pour-$count-$dial
+    echo "bench_dial: $count bodies, speculative speed $dial m/s" >&2
+    "$bin" "$tmp/crowd$count.toml" --speculative-speed "$dial" --no-render --no-progress \
+      --sample-every 0.5 "${run_opts[@]}" --out "$dir" >/dev/null 2>&1 ||
+      echo "bench_dial: run failed ($count, $dial)" >&2
+    rows+=("$count $dial $dir")
+  done
+done
+cat >"$tmp/table.py" <<'PY'
+import json, sys
+print("| pour | dial (m/s) | simulated s | wall s | wall per simulated s | worst 0.1 s frame | ended "
+      "| events (< g·dt/2, < 0.2, < 1, faster m/s) | contacts | LCP rows | deepest overlap (µm) "
+      "| worst LCP violation (m/s) | energy at end (J) |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+for line in sys.stdin:
+    count, dial, d = line.split()
+    try:
+        s = json.load(open(d + "/summary.json"))
+    except OSError:
+        print(f"| {count} | {dial} | failed |")
+        continue
+    c = s["counters"]
+    solve = c["solve"]
+    bands = ", ".join(map(str, c["toi_events_by_approach"]))
+    cells = [count, dial, f"{s['sim_time_s']:.2f}", f"{s['wall_time_s']:.2f}",
+             f"{s['wall_time_s'] / max(s['sim_time_s'], 1e-9):.3f}", f"{s['worst_frame_s']:.3f}",
+             s["end_reason"], f"{c['toi_events']} ({bands})", str(c["contacts"]), str(solve["rows"]),
+             f"{s['max_penetration_m'] * 1e6:.2f}", f"{solve.get('worst_violation', 0.0):.1e}",
+             f"{s['energy_final_j']:.3f}"]
+    print("| " + " | ".join(cells) + " |")
+PY
+printf '%s\n' "${rows[@]}" | python3 "$tmp/table.py" | tee "$out/dial.md"
+echo "bench_dial: results in $out/dial.md" >&2
