@@ -813,11 +813,13 @@ fn solve_phase(
             Phase::Impact => 0.0,
         });
         // The energy a deferred approach lost at its speculative contact,
-        // which its bounce may give back (`energy_guard`).
+        // which its bounce may give back (`energy_guard`): the most of any
+        // one row's, as a patch's points carry the same approach of one
+        // body and their sum would count it once a point.
         if matches!(phase, Phase::Impact) && basis < vn.min(0.0) {
             let a_nn = normal.coupling(&normal);
             if a_nn > 0.0 {
-                deferred += 0.5 * (basis * basis - vn.min(0.0).powi(2)) / a_nn;
+                deferred = f64::max(deferred, 0.5 * (basis * basis - vn.min(0.0).powi(2)) / a_nn);
             }
         }
         restitution.push(match phase {
