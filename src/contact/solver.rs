@@ -573,7 +573,17 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
     let curvature: Vec<f64> = task
         .contacts
         .iter()
-        .map(|c| gap_curvature(task, c, &v, &w, &spin_rate))
+        // A speculative contact's points are apart: the gap's curvature
+        // there is no prediction of a touch (a spinning body's far corner
+        // turns away within the step), so its row asks only what the
+        // velocities give.
+        .map(|c| {
+            if c.near {
+                0.0
+            } else {
+                gap_curvature(task, c, &v, &w, &spin_rate)
+            }
+        })
         .map(|k| {
             if k.abs() * task.dt < SEPARATING_EPS {
                 0.0

@@ -47,10 +47,9 @@ pub struct RenderSettings {
 }
 
 /// `world.speculative_speed` where a scene does not give it (m/s): 0, the
-/// exact model. The speculative contacts are experimental: they add more
-/// rows to a pile's islands than the events they remove save, and the
-/// 1000-body pour gains energy with them (`docs/benchmarks.md`, *The
-/// contact model's dial*).
+/// exact model. The speculative contacts add more rows to a pile's
+/// islands than the events they remove save (`docs/benchmarks.md`, *The
+/// contact model's dial*), so they are asked for, not assumed.
 pub const DEFAULT_SPECULATIVE_SPEED: f64 = 0.0;
 
 /// `world.pile_bodies` where a scene does not give it: an approach whose two

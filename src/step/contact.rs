@@ -446,6 +446,29 @@ impl Region<'_> {
             return points;
         }
         let settings = self.st.settings;
+        // A body that turns more than `SPIN_TRUST` within the interval
+        // moves its points off the straight lines a speculative row
+        // predicts: its approaches stay exact events.
+        let turns_fast = |i: usize| {
+            self.body_at(i, seg[i].state)
+                .angular_velocity(self.object(i))
+                .norm()
+                * h
+                > SPIN_TRUST
+        };
+        if turns_fast(t.a.index()) || turns_fast(t.b.index()) {
+            return points;
+        }
+        // Both bodies solved here, or one against a body that does not
+        // move (fixed, or resting): a body that moves but is not solved
+        // here (outside an impact's members, or driven) would push its
+        // partner along a speculative row with nothing to give, against
+        // whatever holds the partner (a nut between it and the floor took
+        // 66 N·s).
+        let held = |i: usize| piles.island[i].is_some() || !self.moving(i);
+        if !(held(t.a.index()) && held(t.b.index())) {
+            return points;
+        }
         let in_pile = piles.pair_size(t.a, t.b) >= settings.pile_bodies;
         let limit = if in_pile {
             settings.speculative_speed().max(settings.slow_speed())
