@@ -9,7 +9,8 @@
 //! Exit status: 0 done, 2 bad input (scene, mesh, options, a refused
 //! `--resume` checkpoint, an output folder `view` refuses), 3 the run went
 //! numerically wrong (outputs written so far and the last checkpoint are
-//! kept), 1 anything else.
+//! kept), 130 or 143 ended by SIGINT or SIGTERM (outputs and a checkpoint
+//! written, `rigidsim::interrupt`), 1 anything else.
 
 mod view;
 
@@ -334,6 +335,14 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             eprintln!("rigidsim: {msg}");
         }
     };
+    // Every rank takes Ctrl-C and SIGTERM (under mpirun each gets one):
+    // rank 0 ends the run at the next step boundary, the others keep
+    // answering it until it does (`rigidsim::interrupt`).
+    if let Err(e) = rigidsim::interrupt::install() {
+        say(&format!(
+            "warning: Ctrl-C will end the run where it stands: {e}"
+        ));
+    }
 
     // Every rank loads the scene itself; they all fail alike on bad input,
     // and only rank 0 says so.
@@ -420,7 +429,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         } else {
             cluster::worker_loop(&world, &scene, cluster::slow_factor(&cli.slow_rank, rank));
         }
-        return ExitCode::SUCCESS;
+        return interrupted_status().unwrap_or(ExitCode::SUCCESS);
     }
 
     let mut inline = Inline::default();
@@ -493,7 +502,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
                 summary.end_reason,
                 out_dir.display()
             );
-            ExitCode::SUCCESS
+            interrupted_status().unwrap_or(ExitCode::SUCCESS)
         }
         Err(RunError::Failed(msg)) => {
             eprintln!(
@@ -507,4 +516,11 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             world.abort(1);
         }
     }
+}
+
+/// 130 after Ctrl-C, 143 after SIGTERM (the shell's status for a process the
+/// signal ended), once the run has kept its work; `None` without a signal.
+fn interrupted_status() -> Option<ExitCode> {
+    rigidsim::interrupt::requested()
+        .map(|sig| ExitCode::from(rigidsim::interrupt::exit_status(sig) as u8))
 }
