@@ -1,4 +1,4 @@
-//! Ctrl-C keeps the work. SIGINT or SIGTERM on a run (or a live session)
+//! Ctrl-C keeps the work. SIGINT or SIGTERM on a run (or a live run)
 //! does not end the process: it raises a flag that the frame loop reads at
 //! each step boundary, so the step under way finishes, the trajectory gets
 //! its end row, and `summary.json` (`end_reason = "interrupted"`) and a

@@ -445,7 +445,7 @@ impl FrameSink for InlineFrames {
 }
 
 /// What acts on a run between its steps besides the scene itself: nothing
-/// for a plain run (`Unattended`); a person's inputs for a live session or
+/// for a plain run (`Unattended`); a person's inputs for a live run or
 /// a recorded one (`rigidsim live`, `rigidsim run --inputs`).
 pub trait Driver {
     /// The step the run ends at, given the scene's (`Settings::total_steps`).

@@ -12,56 +12,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ExitStatus};
 use std::time::{Duration, Instant};
 
-/// Four boxes tumbling on a floor at a small step, so a run takes real time
-/// and (with `--no-sleep`) never ends by itself before it is signalled.
-const SCENE: &str = r#"
-[world]
-dt = 0.001
-duration = 1000.0
-
-[objects.floor]
-shape = { box = { half_extents = [2.0, 2.0, 0.1] } }
-mass = 1.0
-restitution = 0.3
-friction = 0.5
-
-[objects.cube]
-shape = { box = { half_extents = [0.05, 0.05, 0.05] } }
-mass = 0.5
-restitution = 0.3
-friction = 0.5
-
-[[bodies]]
-object = "floor"
-position = [0.0, 0.0, -0.1]
-fixed = true
-
-[[bodies]]
-object = "cube"
-position = [0.0, 0.0, 0.3]
-velocity = [0.5, 0.0, 0.0]
-angular_velocity = [3.0, 1.0, 0.0]
-
-[[bodies]]
-object = "cube"
-position = [0.3, 0.0, 0.5]
-angular_velocity = [0.0, 4.0, 1.0]
-
-[[bodies]]
-object = "cube"
-position = [-0.3, 0.2, 0.4]
-velocity = [0.0, -0.4, 0.0]
-
-[[bodies]]
-object = "cube"
-position = [0.0, -0.3, 0.6]
-angular_velocity = [2.0, 0.0, 5.0]
-"#;
-
-fn scene_in(dir: &Path) -> PathBuf {
-    let path = dir.join("tumbling.toml");
-    std::fs::write(&path, SCENE).unwrap();
-    path
+/// Four cubes tumbling on a floor at a small step, so a run takes real
+/// time and (with `--no-sleep`) never ends by itself before it is signalled.
+fn scene_in(_dir: &Path) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/tumbling_cubes.toml")
 }
 
 fn mpirun() -> PathBuf {

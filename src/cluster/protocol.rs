@@ -55,7 +55,7 @@ pub enum Request {
         /// Per range: its group (an index into `inputs`) and its pairs.
         shares: Vec<(u32, (usize, usize))>,
     },
-    /// At a step boundary of a live session or a replay of one
+    /// At a step boundary of a live run or a replay of one
     /// (`Executor::share_forces`): the scene's external forces from now on,
     /// all of them (its own `[[forces]]` and the hand's). The worker
     /// answers `Pong`. Never sent by a plain run.

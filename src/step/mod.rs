@@ -97,7 +97,7 @@ pub trait Executor {
     /// result.
     fn poll(&mut self) {}
     /// The scene's external forces changed at a step boundary (a live
-    /// session's hand, `run --inputs`): every rank that steps groups must
+    /// live run's hand, `run --inputs`): every rank that steps groups must
     /// integrate with these from the next step on. Inline: nothing to do,
     /// the step reads `World::scene`.
     fn share_forces(&mut self, _forces: &[ForceWindow]) {}
