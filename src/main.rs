@@ -416,6 +416,12 @@ fn run_scene(cli: RunArgs, live: Option<LiveServer>) -> ExitCode {
         say(&format!("error: {e}"));
         return ExitCode::from(2);
     }
+    // A live run may last hours: its trajectory is sampled at the scene's
+    // `sample_every` where given, otherwise at the frame interval, not at
+    // every step (docs/live.md states what an hour costs on disk).
+    if live.is_some() && scene.settings.sample_every.is_none() {
+        scene.settings.sample_every = Some(scene.settings.frame_interval);
+    }
     // `--resume`: rank 0 reads the checkpoint and checks it against the scene,
     // then tells every rank whether to go on, so that a refused checkpoint
     // ends all ranks alike (exit 2) before any work is handed out. Only rank 0

@@ -147,6 +147,8 @@ pub fn start_live(addr: SocketAddr, shared: Arc<Shared>) -> std::io::Result<Serv
     let router = Router::new()
         .route("/", get(live_page))
         .route("/ws", get(upgrade))
+        // Browsers ask for an icon; there is none, and saying so is no error.
+        .route("/favicon.ico", get(|| async { StatusCode::NO_CONTENT }))
         .fallback(not_found)
         .with_state(Arc::clone(&shared));
     spawn(addr, router, Some(shared))
