@@ -49,6 +49,36 @@ impl Live {
         }
     }
 
+    /// As `start`, under `mpirun -np np` (rank 0 prints the URL).
+    fn start_under_mpirun(np: u32, scene: &Path, out: &Path) -> Live {
+        let mut child = common::command("mpirun")
+            .args(["--oversubscribe", "-np", &np.to_string()])
+            .arg(env!("CARGO_BIN_EXE_rigidsim"))
+            .arg("live")
+            .arg(scene)
+            .args(["--port", "0", "--no-render", "--out"])
+            .arg(out)
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(out.with_extension("stderr")).unwrap())
+            .spawn()
+            .expect("cannot start mpirun");
+        let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
+        let url = loop {
+            let mut line = String::new();
+            assert!(reader.read_line(&mut line).unwrap() > 0, "no URL printed");
+            if line.trim().starts_with("http://") {
+                break line.trim().to_string();
+            }
+        };
+        // The ranks' other output goes on; nobody reads it.
+        std::thread::spawn(move || std::io::copy(&mut reader, &mut std::io::sink()));
+        Live {
+            child,
+            out: out.to_path_buf(),
+            url,
+        }
+    }
+
     /// host:port of the server.
     fn authority(&self) -> &str {
         let rest = &self.url["http://".len()..];
@@ -468,4 +498,77 @@ fn a_held_body_striking_others_replays_alike_on_one_and_two_ranks() {
     )
     .unwrap();
     assert_ne!(plain["state_hash"], one["state_hash"]);
+}
+
+/// The benchmark of docs/live.md, not a check: the wall time from sending a
+/// drag message to the first state that reflects it (the first with the
+/// drag counted in `inputs`), median and worst over 100 drags, alone and
+/// under `mpirun -np 3`, on the scene in `LIVE_BENCH_SCENE` (default
+/// `scenes/nuts_and_bolts.toml`):
+///
+/// `cargo test --release --test live -- --ignored --nocapture drag_latency`
+#[test]
+#[ignore]
+fn drag_latency() {
+    let scene = std::env::var_os("LIVE_BENCH_SCENE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| common::bundled("nuts_and_bolts.toml"));
+    for np in [None, Some(3)] {
+        let dir = tempfile::tempdir().unwrap();
+        let mut live = match np {
+            None => Live::start(&scene, &dir.path().join("bench"), &[]),
+            Some(n) => Live::start_under_mpirun(n, &scene, &dir.path().join("bench")),
+        };
+        let mut socket = live.connect();
+        let facts = receive_kind(&mut socket, "scene");
+        let body = facts["body_kind"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .position(|k| k == "dynamic")
+            .unwrap();
+        let mut state = receive_kind(&mut socket, "state");
+        // Let the scene settle a little, then take hold of a body.
+        while state["t"].as_f64().unwrap() < 1.0 {
+            state = receive_kind(&mut socket, "state");
+        }
+        let p = position(&state, body);
+        send(
+            &mut socket,
+            &json!({"type": "grab", "body": body, "point": p}),
+        );
+        let mut sent = 1u64 + state["inputs"].as_u64().unwrap();
+        let mut latencies = Vec::new();
+        for k in 0..100 {
+            let target = [p[0], p[1], p[2] + 0.1 + 0.002 * (k % 10) as f64];
+            send(&mut socket, &json!({"type": "drag", "target": target}));
+            sent += 1;
+            let clock = Instant::now();
+            loop {
+                let s = receive_kind(&mut socket, "state");
+                if s["inputs"].as_u64().unwrap() >= sent {
+                    latencies.push(clock.elapsed().as_secs_f64() * 1e3);
+                    state = s;
+                    break;
+                }
+            }
+            // Drags at a mouse's pace, out of step with the states.
+            std::thread::sleep(Duration::from_micros(7_000 + 1_300 * (k % 7)));
+        }
+        latencies.sort_by(f64::total_cmp);
+        let name = scene.file_name().unwrap().to_string_lossy();
+        println!(
+            "{name}, {}: drag → state median {:.1} ms, worst {:.1} ms over {} drags; \
+             real-time factor {:.2}, worst frame {:.1} ms (frame interval {:.1} ms)",
+            np.map_or("alone".to_string(), |n| format!("mpirun -np {n}")),
+            latencies[latencies.len() / 2],
+            latencies[latencies.len() - 1],
+            latencies.len(),
+            state["realtime_factor"].as_f64().unwrap(),
+            state["worst_frame_s"].as_f64().unwrap() * 1e3,
+            state["frame_interval_s"].as_f64().unwrap() * 1e3,
+        );
+        send(&mut socket, &json!({"type": "stop"}));
+        live.wait(Duration::from_secs(30));
+    }
 }

@@ -182,6 +182,7 @@ impl LiveDriver {
             worst_frame_s: self.pacer.worst_frame_s(),
             frame_interval_s: self.frame_interval,
             behind_s: self.pacer.behind_s(),
+            inputs: self.recorded,
         };
         let text = serde_json::to_string(&state).expect("a state serialises");
         if let Some(tx) = &self.states {

@@ -243,6 +243,9 @@ pub struct State<'a> {
     pub frame_interval_s: f64,
     /// How far simulated time trails the wall clock (0 when on time).
     pub behind_s: f64,
+    /// Inputs taken so far (from every client): a client that counts its
+    /// own knows from which state on they have acted.
+    pub inputs: u64,
 }
 
 #[cfg(test)]
