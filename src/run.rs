@@ -467,8 +467,8 @@ pub trait Driver {
     ) -> Result<Option<&'static str>, RunError> {
         Ok(None)
     }
-    /// After each step.
-    fn after_step(&mut self, _world: &World) {}
+    /// After each step (before its sample and any checkpoint).
+    fn after_step(&mut self, _world: &mut World) {}
     /// The run ended at `world.steps` for `end_reason` (outputs not yet
     /// written): notes for the summary.
     fn finish(&mut self, _world: &World, _end_reason: &str) -> Result<Vec<String>, RunError> {
@@ -677,7 +677,7 @@ pub fn run_driven(
             failure = Some(f.to_string());
             break;
         }
-        driver.after_step(&world);
+        driver.after_step(&mut world);
         let s = world.steps;
         if s % sample_stride == 0 || s == total_steps {
             traj.sample(world.time(), &world.bodies, &world.scene.objects)

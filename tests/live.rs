@@ -301,6 +301,29 @@ fn a_dragged_body_rises_and_the_recorded_inputs_replay_to_the_same_hash() {
     let two = replay(Some(2), "replay2", &["--force-distribute"]);
     assert_eq!(two["state_hash"], hash.as_str(), "replay on 2 ranks");
     assert_eq!(two["end_reason"], "duration");
+
+    // Stopped while the cube is held, then resumed with the inputs: the
+    // hand is taken up from the recording and the run ends as the live one.
+    let step_of = |kind: &str| {
+        inputs
+            .lines()
+            .map(|l| serde_json::from_str::<Value>(l).unwrap())
+            .find(|v| v["type"] == kind)
+            .unwrap()["step"]
+            .as_u64()
+            .unwrap()
+    };
+    let held = (step_of("grab") + step_of("release")) / 2;
+    let until = (held as f64 * 0.01).to_string();
+    let first = replay(
+        None,
+        "resumed",
+        &["--duration", &until, "--checkpoint-every", &until],
+    );
+    assert_eq!(first["steps"], held);
+    let checkpoint = dir.path().join("resumed/checkpoint.bin");
+    let resumed = replay(None, "resumed", &["--resume", checkpoint.to_str().unwrap()]);
+    assert_eq!(resumed["state_hash"], hash.as_str(), "resumed mid-grab");
 }
 
 /// Every kind of bad message gets an error on its socket and the run goes

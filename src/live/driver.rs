@@ -112,15 +112,10 @@ impl LiveDriver {
         hand: u32,
         input: Input,
     ) -> Result<Option<&'static str>, RunError> {
-        let line = Record {
-            step: world.steps,
-            hand,
-            input: input.clone(),
-        }
-        .line();
-        writeln!(self.record, "{line}").map_err(|e| self.io(e))?;
-        self.recorded += 1;
-        match input {
+        let step = world.steps;
+        let mut end = None;
+        let mut local = None;
+        match &input {
             Input::Pause => self.paused = true,
             Input::Resume => {
                 if self.paused {
@@ -128,15 +123,23 @@ impl LiveDriver {
                     self.pacer.resume(world.time());
                 }
             }
-            Input::Stop => return Ok(Some("stopped")),
-            input => {
-                self.hands.apply(world, hand, &input);
-                if input == Input::Reset {
-                    self.publish(world, true);
-                }
-            }
+            Input::Stop => end = Some("stopped"),
+            input => local = self.hands.apply(world, hand, input),
         }
-        Ok(None)
+        let reset = input == Input::Reset;
+        let line = Record {
+            step,
+            hand,
+            input,
+            local,
+        }
+        .line();
+        writeln!(self.record, "{line}").map_err(|e| self.io(e))?;
+        self.recorded += 1;
+        if reset {
+            self.publish(world, true);
+        }
+        Ok(end)
     }
 
     /// Sends the state (when one is due, or `now`), and keeps the input
@@ -234,7 +237,8 @@ impl Driver for LiveDriver {
         Ok(None)
     }
 
-    fn after_step(&mut self, world: &World) {
+    fn after_step(&mut self, world: &mut World) {
+        self.hands.after_step(world);
         self.pacer.stepped(world.time());
         self.publish(world, false);
     }

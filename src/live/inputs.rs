@@ -1,8 +1,9 @@
 //! Inputs are data: each takes effect at a step boundary, and `inputs.jsonl`
 //! keeps it with that step, one JSON object a line,
-//! `{"step":S,"hand":H,"type":...}` (the message's own fields follow), and a
-//! last line `{"step":N,"type":"end","end_reason":...}` with the live run's
-//! last step. `rigidsim run SCENE --inputs FILE` applies them at the same
+//! `{"step":S,"hand":H,"type":...}` (the message's own fields follow; a
+//! grab also keeps `"local"`, the point it holds in the body's frame), and
+//! a last line `{"step":N,"type":"end","end_reason":...}` with the live
+//! run's last step. `rigidsim run SCENE --inputs FILE` applies them at the same
 //! steps, through the same `Hands`, so a live run replays to its state hash.
 //!
 //! A hand's force and a push reach the step as external forces over the
@@ -30,6 +31,10 @@ pub struct Record {
     pub step: u64,
     pub hand: u32,
     pub input: Input,
+    /// For a grab: the point held, in the body's frame from its centre of
+    /// mass, as the grab found it. A run resumed past the grab holds the
+    /// body there without the body's state at the grab.
+    pub local: Option<[f64; 3]>,
 }
 
 impl Record {
@@ -37,12 +42,17 @@ impl Record {
     pub fn line(&self) -> String {
         let message = serde_json::to_string(&self.input).expect("an input serialises");
         // The message is an object `{"type":...}`: step and hand go first.
-        format!(
+        let mut line = format!(
             "{{\"step\":{},\"hand\":{},{}",
             self.step,
             self.hand,
             &message[1..]
-        )
+        );
+        if let Some(local) = self.local {
+            line.pop();
+            line += &format!(",\"local\":{}}}", serde_json::json!(local));
+        }
+        line
     }
 }
 
@@ -92,6 +102,12 @@ pub fn read(path: &Path, scene: &Scene) -> Result<Recording, String> {
             end = Some(step);
             continue;
         }
+        let local = match object.remove("local") {
+            None => None,
+            Some(l) => Some(
+                serde_json::from_value::<[f64; 3]>(l).map_err(|e| at(format!("\"local\": {e}")))?,
+            ),
+        };
         let hand = match object.remove("hand") {
             None => 0,
             Some(h) => h
@@ -101,7 +117,12 @@ pub fn read(path: &Path, scene: &Scene) -> Result<Recording, String> {
         };
         let input: Input = serde_json::from_value(value).map_err(|e| at(e.to_string()))?;
         input.check(&facts, false).map_err(at)?;
-        records.push(Record { step, hand, input });
+        records.push(Record {
+            step,
+            hand,
+            input,
+            local,
+        });
     }
     let last_step = end
         .or(records.last().map(|r| r.step))
@@ -127,6 +148,8 @@ pub struct Hands {
     grabs: BTreeMap<u32, Grab>,
     /// (body, point, impulse) for the next step.
     pushes: Vec<(u32, Vector3<f64>, Vector3<f64>)>,
+    /// The forces the other ranks hold (`Executor::share_forces`).
+    shared: Vec<ForceWindow>,
 }
 
 impl Hands {
@@ -135,12 +158,14 @@ impl Hands {
             own: scene.forces.clone(),
             grabs: BTreeMap::new(),
             pushes: Vec::new(),
+            shared: scene.forces.clone(),
         }
     }
 
-    /// Applies `input` from `hand` at this step boundary. Pause, resume and
-    /// stop belong to the live run, not the world: nothing here.
-    pub fn apply(&mut self, world: &mut World, hand: u32, input: &Input) {
+    /// Applies `input` from `hand` at this step boundary; for a grab,
+    /// returns the point held in the body's frame (`Record::local`). Pause,
+    /// resume and stop belong to the live run, not the world: nothing here.
+    pub fn apply(&mut self, world: &mut World, hand: u32, input: &Input) -> Option<[f64; 3]> {
         match input {
             Input::Grab { body, point } => {
                 let s = &world.bodies[*body as usize].state;
@@ -154,6 +179,7 @@ impl Hands {
                         target: point,
                     },
                 );
+                return Some(local.into());
             }
             Input::Drag { target } => {
                 if let Some(g) = self.grabs.get_mut(&hand) {
@@ -177,17 +203,50 @@ impl Hands {
             }
             Input::Pause | Input::Resume | Input::Stop => {}
         }
+        None
+    }
+
+    /// Takes up the hands as `record`, applied at an earlier step, left
+    /// them (a run resumed from a checkpoint, which does not keep them).
+    /// Pushes acted over their own step and leave nothing. False for a grab
+    /// without its `local` point (written by hand): it cannot be held.
+    pub fn restore(&mut self, record: &Record) -> bool {
+        match (&record.input, record.local) {
+            (Input::Grab { .. }, None) => return false,
+            (Input::Grab { body, point }, Some(local)) => {
+                self.grabs.insert(
+                    record.hand,
+                    Grab {
+                        body: *body,
+                        local: local.into(),
+                        target: Vector3::from(*point),
+                    },
+                );
+            }
+            (Input::Drag { target }, _) => {
+                if let Some(g) = self.grabs.get_mut(&record.hand) {
+                    g.target = Vector3::from(*target);
+                }
+            }
+            (Input::Release, _) => {
+                self.grabs.remove(&record.hand);
+            }
+            (Input::Reset, _) => self.grabs.clear(),
+            (Input::Push { .. } | Input::Pause | Input::Resume | Input::Stop, _) => {}
+        }
+        true
     }
 
     /// Sets the external forces of the next step: the scene's own, each
     /// hand's spring on the body it holds, and each push as J / dt over the
-    /// step; shares them with the ranks when they changed.
+    /// step; shares them with the ranks when they changed. `after_step`
+    /// takes them out again.
     pub fn forces_for_next_step(&mut self, world: &mut World, exec: &mut dyn Executor) {
         let dt = world.scene.settings.dt;
+        // The step's own interval, its ends as `World::time` gives them:
+        // a window left with the workers never acts in a later step.
         let start = world.time();
-        // Replaced at every boundary, so the end only needs to lie past the
-        // step's: half a step past it, clear of rounding.
-        let end = start + 1.5 * dt;
+        let end = (world.steps + 1) as f64 * dt;
         let mut forces = self.own.clone();
         let window = |body: u32, force, torque| ForceWindow {
             body: BodyId(body),
@@ -220,9 +279,19 @@ impl Hands {
             let f = impulse / dt;
             forces.push(window(body, f, (point - b.state.position).cross(&f)));
         }
-        if forces != world.scene.forces {
+        if forces != self.shared {
             exec.share_forces(&forces);
-            world.scene.forces = forces;
+            self.shared = forces.clone();
+        }
+        world.scene.forces = forces;
+    }
+
+    /// After the step: the scene's forces are its own again, so that a
+    /// checkpoint knows the scene it was loaded from (its fingerprint
+    /// counts the forces).
+    pub fn after_step(&self, world: &mut World) {
+        if world.scene.forces != self.own {
+            world.scene.forces = self.own.clone();
         }
     }
 }
@@ -264,6 +333,7 @@ mod tests {
                     body: 1,
                     point: [0.1, -0.2, 0.45],
                 },
+                local: Some([0.1, -0.2, 1.0 / 3.0]),
             },
             Record {
                 step: 3,
@@ -271,11 +341,13 @@ mod tests {
                 input: Input::Drag {
                     target: [0.1 + 1e-17, 1.0 / 3.0, 0.7],
                 },
+                local: None,
             },
             Record {
                 step: 9,
                 hand: 2,
                 input: Input::Reset,
+                local: None,
             },
         ];
         let mut text: String = records.iter().map(|r| r.line() + "\n").collect();

@@ -16,6 +16,9 @@ pub struct Replay {
     hands: Hands,
     /// `--duration` given: it, not the recording, says where the run ends.
     bounded: bool,
+    applied: usize,
+    /// Grabs before a resumed run's first step that could not be taken up.
+    unheld: usize,
 }
 
 impl Replay {
@@ -25,6 +28,8 @@ impl Replay {
             next: 0,
             hands: Hands::new(scene),
             bounded,
+            applied: 0,
+            unheld: 0,
         }
     }
 }
@@ -49,24 +54,40 @@ impl Driver for Replay {
     ) -> Result<Option<&'static str>, RunError> {
         let records = &self.recording.records;
         // Inputs before the first boundary this run sees (a resumed run's
-        // checkpoint) were the run it continues'.
+        // checkpoint) acted in the run it continues: only the hands they
+        // left holding are taken up.
         while self.next < records.len() && records[self.next].step < world.steps {
+            if !self.hands.restore(&records[self.next]) {
+                self.unheld += 1;
+            }
             self.next += 1;
         }
         while self.next < records.len() && records[self.next].step == world.steps {
             let r = &records[self.next];
             self.hands.apply(world, r.hand, &r.input);
             self.next += 1;
+            self.applied += 1;
         }
         self.hands.forces_for_next_step(world, exec);
         Ok(None)
     }
 
+    fn after_step(&mut self, world: &mut World) {
+        self.hands.after_step(world);
+    }
+
     fn finish(&mut self, _world: &World, _end_reason: &str) -> Result<Vec<String>, RunError> {
-        Ok(vec![format!(
-            "replayed {} of {} recorded inputs",
-            self.next,
+        let mut notes = vec![format!(
+            "applied {} of the {} recorded inputs",
+            self.applied,
             self.recording.records.len()
-        )])
+        )];
+        if self.unheld > 0 {
+            notes.push(format!(
+                "{} grabs before the checkpoint have no \"local\" point: those bodies are not held",
+                self.unheld
+            ));
+        }
+        Ok(notes)
     }
 }
