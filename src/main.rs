@@ -468,9 +468,15 @@ fn run_scene(cli: RunArgs, live: Option<LiveServer>) -> ExitCode {
                 (Some(path), _) => live::inputs::read(path, &scene)
                     .map(|r| recording = Some(r))
                     .map_err(|e| (e, 2)),
-                (None, Some(l)) => start_live(&scene, &out_dir, l, opts.duration.is_some())
-                    .map(|s| live_driver = Some(s))
-                    .map_err(|e| (e, 1)),
+                (None, Some(l)) => start_live(
+                    &scene,
+                    &out_dir,
+                    l,
+                    opts.duration.is_some(),
+                    resume.as_ref().map(|ck| ck.steps),
+                )
+                .map(|s| live_driver = Some(s))
+                .map_err(|e| (e, 1)),
                 (None, None) => Ok(()),
             };
             if let Err((e, c)) = started {
@@ -630,13 +636,15 @@ fn start_live(
     out_dir: &std::path::Path,
     live: &LiveServer,
     bounded: bool,
+    resumed_at: Option<u64>,
 ) -> Result<live::driver::LiveDriver, String> {
     let token = if live.addr.ip().is_loopback() {
         None
     } else {
         Some(live::server::random_token().map_err(|e| format!("no random token: {e}"))?)
     };
-    let driver = live::driver::LiveDriver::start(scene, out_dir, live.addr, token, bounded)?;
+    let driver =
+        live::driver::LiveDriver::start(scene, out_dir, live.addr, token, bounded, resumed_at)?;
     use std::io::Write;
     println!("{}", driver.url);
     let _ = std::io::stdout().flush();

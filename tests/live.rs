@@ -595,3 +595,68 @@ fn drag_latency() {
         live.wait(Duration::from_secs(30));
     }
 }
+
+/// A live run interrupted while a hand holds the cube, then resumed from
+/// its checkpoint as a live run into the same folder: the hand still holds
+/// the cube, `inputs.jsonl` holds the whole of both, and replayed from the
+/// start it ends on the resumed live run's state hash.
+#[test]
+fn a_resumed_live_run_keeps_its_hands_and_replays_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::bundled("render_check.toml");
+    let out = dir.path().join("resumed");
+    let mut first = Live::start(&scene, &out, &[]);
+    let mut socket = first.connect();
+    receive_kind(&mut socket, "scene");
+    let s = loop {
+        let s = receive_kind(&mut socket, "state");
+        if s["resting"] == json!([1]) {
+            break s;
+        }
+    };
+    let p = position(&s, 1);
+    send(&mut socket, &json!({"type": "grab", "body": 1, "point": p}));
+    send(
+        &mut socket,
+        &json!({"type": "drag", "target": [p[0], p[1], p[2] + 0.3]}),
+    );
+    loop {
+        let s = receive_kind(&mut socket, "state");
+        if position(&s, 1)[2] > p[2] + 0.2 {
+            break;
+        }
+    }
+    // SAFETY: kill(2) on our own child, not yet reaped.
+    unsafe { libc::kill(first.child.id() as libc::pid_t, libc::SIGINT) };
+    assert_eq!(first.wait(Duration::from_secs(10)).code(), Some(130));
+    drop(socket);
+    let checkpoint = out.join("checkpoint.bin");
+    let mut second = Live::start(&scene, &out, &["--resume", checkpoint.to_str().unwrap()]);
+    let mut socket = second.connect();
+    receive_kind(&mut socket, "scene");
+    // Still held up by the hand the first live run left holding it.
+    let wall = Instant::now();
+    while wall.elapsed() < Duration::from_millis(500) {
+        let s = receive_kind(&mut socket, "state");
+        assert!(position(&s, 1)[2] > p[2] + 0.15, "the cube was let go: {s}");
+    }
+    send(&mut socket, &json!({"type": "stop"}));
+    assert!(second.wait(Duration::from_secs(10)).success());
+    let s = second.summary();
+    let o = common::command(env!("CARGO_BIN_EXE_rigidsim"))
+        .arg("run")
+        .arg(&scene)
+        .arg("--inputs")
+        .arg(out.join("inputs.jsonl"))
+        .args(["--no-render", "--no-progress", "--out"])
+        .arg(dir.path().join("whole"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{o:?}");
+    let whole: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("whole/summary.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(whole["steps"], s["steps"]);
+    assert_eq!(whole["state_hash"], s["state_hash"]);
+}

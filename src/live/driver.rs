@@ -45,20 +45,38 @@ pub struct LiveDriver {
 
 impl LiveDriver {
     /// Starts the server on `addr` and opens `OUT/inputs.jsonl`. `token`:
-    /// required on every request (bound beyond loopback).
+    /// required on every request (bound beyond loopback). `resumed_at`: the
+    /// step of the checkpoint a resumed live run continues from; the inputs
+    /// the file holds from before it are kept (and the hands they left
+    /// holding taken up), so that the file replays the whole live run.
     pub fn start(
         scene: &Scene,
         out_dir: &Path,
         addr: SocketAddr,
         token: Option<String>,
         bounded: bool,
+        resumed_at: Option<u64>,
     ) -> Result<LiveDriver, String> {
         std::fs::create_dir_all(out_dir)
             .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
         let record_path = out_dir.join(inputs::FILE_NAME);
-        let record = std::fs::File::create(&record_path)
+        let earlier: Vec<Record> = match resumed_at {
+            Some(step) if record_path.is_file() => inputs::read(&record_path, scene)?
+                .records
+                .into_iter()
+                .filter(|r| r.step < step)
+                .collect(),
+            _ => Vec::new(),
+        };
+        let mut record = std::fs::File::create(&record_path)
             .map(BufWriter::new)
             .map_err(|e| format!("cannot create {}: {e}", record_path.display()))?;
+        let mut hands = Hands::new(scene);
+        for r in &earlier {
+            writeln!(record, "{}", r.line())
+                .map_err(|e| format!("{}: {e}", record_path.display()))?;
+            hands.restore(r);
+        }
         let (input_tx, input_rx) = mpsc::channel();
         let (state_tx, state_rx) = watch::channel::<Arc<str>>(Arc::from(""));
         let scene_message: Arc<str> = super::scene_message(scene).into();
@@ -87,10 +105,10 @@ impl LiveDriver {
             states: Some(state_tx),
             shared,
             server: Some(server),
-            hands: Hands::new(scene),
+            hands,
             record,
             record_path,
-            recorded: 0,
+            recorded: earlier.len() as u64,
             pacer: Pacer::new(0.0, frame_interval),
             paused: false,
             bounded,
