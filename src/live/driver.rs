@@ -90,10 +90,12 @@ impl LiveDriver {
         ));
         let server = server::start_live(addr, Arc::clone(&shared))
             .map_err(|e| format!("cannot listen on {addr}: {e}"))?;
+        // Bound to every address: the URL names this host, as the lab's
+        // other PCs reach it.
         let shown = if server.addr.ip().is_unspecified() {
-            SocketAddr::new([127, 0, 0, 1].into(), server.addr.port())
+            format!("{}:{}", rigidsim::cluster::hostname(), server.addr.port())
         } else {
-            server.addr
+            server.addr.to_string()
         };
         let url = match &token {
             None => format!("http://{shown}/"),
