@@ -529,8 +529,8 @@ fn a_held_body_striking_others_replays_alike_on_one_and_two_ranks() {
 /// The benchmark of docs/live.md, not a check: the wall time from sending a
 /// drag message to the first state that reflects it (the first with the
 /// drag counted in `inputs`), median and worst over 100 drags, alone and
-/// under `mpirun -np 3`, on the scene in `LIVE_BENCH_SCENE` (default
-/// `scenes/nuts_and_bolts.toml`):
+/// under `mpirun -np 3` (or the rank counts in `LIVE_BENCH_RANKS`), on the
+/// scene in `LIVE_BENCH_SCENE` (default `scenes/nuts_and_bolts.toml`):
 ///
 /// `cargo test --release --test live -- --ignored --nocapture drag_latency`
 #[test]
@@ -539,7 +539,17 @@ fn drag_latency() {
     let scene = std::env::var_os("LIVE_BENCH_SCENE")
         .map(PathBuf::from)
         .unwrap_or_else(|| common::bundled("nuts_and_bolts.toml"));
-    for np in [None, Some(3)] {
+    // LIVE_BENCH_RANKS: which rank counts, e.g. "1,3" (the default).
+    let ranks: Vec<u32> = std::env::var("LIVE_BENCH_RANKS")
+        .unwrap_or_else(|_| "1,3".into())
+        .split(',')
+        .map(|n| {
+            n.trim()
+                .parse()
+                .expect("LIVE_BENCH_RANKS: rank counts, e.g. 1,3")
+        })
+        .collect();
+    for np in ranks.into_iter().map(|n| (n > 1).then_some(n)) {
         let dir = tempfile::tempdir().unwrap();
         let mut live = match np {
             None => Live::start(&scene, &dir.path().join("bench"), &[]),
