@@ -54,9 +54,10 @@ struct Cli {
 enum Command {
     /// Simulate a scene, alone or under mpirun (the default command).
     Run(RunArgs),
-    /// Simulate a scene at the pace of the wall clock, seen and pushed from
-    /// a browser (page at http://ADDR:PORT/, WebSocket at /ws; docs/live.md),
-    /// alone or under mpirun. Ends on Ctrl-C, --duration, or a stop from the
+    /// Simulate a scene at the pace of the wall clock, seen and pushed from a browser.
+    ///
+    /// Alone or under mpirun; the page at http://ADDR:PORT/, its WebSocket
+    /// at /ws (docs/live.md). Ends on Ctrl-C, --duration, or a stop from the
     /// page, with the outputs of `run` and OUT/inputs.jsonl.
     Live(LiveArgs),
     /// Write a scene's bodies, exactly as rigidsim simulates them, as JSON (no MPI).
