@@ -158,9 +158,10 @@ fn position(state: &Value, body: usize) -> [f64; 3] {
 }
 
 /// Simulated time keeps within a quarter of the wall clock over 2 s on a
-/// light scene; the scene message describes the bodies; a stop message
-/// ends the run with `end_reason = "stopped"`, a checkpoint and the
-/// inputs' last step.
+/// light scene; the scene message describes the bodies; a push lifts the
+/// cube; paused, time stands still; a reset puts the cube back at its
+/// start; a stop message ends the run with `end_reason = "stopped"`, a
+/// checkpoint and the inputs, each recorded, with the last step.
 #[test]
 fn a_live_run_keeps_pace_with_the_wall_clock_and_stops_on_request() {
     let dir = tempfile::tempdir().unwrap();
@@ -188,6 +189,60 @@ fn a_live_run_keeps_pace_with_the_wall_clock_and_stops_on_request() {
         "{sim:.3} s simulated in {wall:.3} s of wall time"
     );
     assert_eq!(last["bodies"].as_array().unwrap().len(), 2);
+
+    // A push up at the resting cube's centre (1 kg, 2 m/s: about 0.2 m up).
+    let p = position(&last, 1);
+    send(
+        &mut socket,
+        &json!({"type": "push", "body": 1, "point": p, "impulse": [0.0, 0.0, 2.0]}),
+    );
+    let mut highest = p[2];
+    let pushed = Instant::now();
+    while pushed.elapsed() < Duration::from_millis(400) {
+        highest = highest.max(position(&receive_kind(&mut socket, "state"), 1)[2]);
+    }
+    assert!(
+        highest > p[2] + 0.1,
+        "pushed up from {:.3}, rose to {highest:.3}",
+        p[2]
+    );
+
+    // Paused, simulated time stands still; resumed, it goes on.
+    send(&mut socket, &json!({"type": "pause"}));
+    let paused = loop {
+        let s = receive_kind(&mut socket, "state");
+        if s["paused"] == true {
+            break s;
+        }
+    };
+    std::thread::sleep(Duration::from_millis(300));
+    let still = receive_kind(&mut socket, "state");
+    assert_eq!(still["t"], paused["t"], "time went on while paused");
+    send(&mut socket, &json!({"type": "resume"}));
+    loop {
+        let s = receive_kind(&mut socket, "state");
+        if s["t"].as_f64().unwrap() > paused["t"].as_f64().unwrap() {
+            assert_eq!(s["paused"], false);
+            break;
+        }
+    }
+
+    // Reset: the cube back at the scene's start (0, 0, 0.45), time going on.
+    let before = receive_kind(&mut socket, "state");
+    send(&mut socket, &json!({"type": "reset"}));
+    let counted = before["inputs"].as_u64().unwrap() + 1;
+    let reset = loop {
+        let s = receive_kind(&mut socket, "state");
+        if s["inputs"].as_u64().unwrap() >= counted {
+            break s;
+        }
+    };
+    assert!(reset["t"].as_f64().unwrap() >= before["t"].as_f64().unwrap());
+    let back = position(&reset, 1);
+    assert!(
+        back[0].abs() < 1e-6 && back[1].abs() < 1e-6 && (back[2] - 0.45).abs() < 0.01,
+        "after reset the cube is at {back:?}"
+    );
     send(&mut socket, &json!({"type": "stop"}));
     assert_eq!(receive_kind(&mut socket, "end")["end_reason"], "stopped");
     let status = live.wait(Duration::from_secs(10));
@@ -196,9 +251,38 @@ fn a_live_run_keeps_pace_with_the_wall_clock_and_stops_on_request() {
     assert_eq!(s["end_reason"], "stopped");
     assert!(live.out.join("checkpoint.bin").is_file());
     let inputs = std::fs::read_to_string(live.out.join("inputs.jsonl")).unwrap();
+    let kinds: Vec<String> = inputs
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<Value>(l).unwrap()["type"]
+                .as_str()
+                .unwrap()
+                .into()
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        ["push", "pause", "resume", "reset", "stop", "end"],
+        "{inputs}"
+    );
     let end: Value = serde_json::from_str(inputs.lines().last().unwrap()).unwrap();
-    assert_eq!(end["type"], "end");
     assert_eq!(end["step"], s["steps"]);
+    // The push and the reset replay to the live run's state.
+    let replayed = dir.path().join("pace_replayed");
+    let o = common::command(env!("CARGO_BIN_EXE_rigidsim"))
+        .arg("run")
+        .arg(common::bundled("render_check.toml"))
+        .arg("--inputs")
+        .arg(live.out.join("inputs.jsonl"))
+        .args(["--no-render", "--no-progress", "--out"])
+        .arg(&replayed)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{o:?}");
+    let r: Value =
+        serde_json::from_str(&std::fs::read_to_string(replayed.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(r["state_hash"], s["state_hash"]);
 }
 
 /// A resting cube grabbed at its centre and dragged 0.5 m up rises (the
