@@ -503,6 +503,34 @@ fn bad_messages_are_answered_with_errors_and_the_run_goes_on() {
     assert_eq!(live.summary()["end_reason"], "interrupted");
 }
 
+/// Under `mpirun -np 2`, rank 0 serves the live run with a worker beside
+/// it; a grab, then a stop, end it with both ranks' accounts in the summary.
+#[test]
+fn a_live_run_under_mpirun_serves_from_rank_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/tumbling_cubes.toml");
+    let mut live = Live::start_under_mpirun(2, &scene, &dir.path().join("mpi"));
+    let mut socket = live.connect();
+    assert_eq!(receive_kind(&mut socket, "scene")["bodies"], 5);
+    let s = receive_kind(&mut socket, "state");
+    let p = position(&s, 2);
+    send(&mut socket, &json!({"type": "grab", "body": 2, "point": p}));
+    send(
+        &mut socket,
+        &json!({"type": "drag", "target": [p[0], p[1], p[2] + 0.2]}),
+    );
+    let until = Instant::now() + Duration::from_millis(500);
+    while Instant::now() < until {
+        receive_kind(&mut socket, "state");
+    }
+    send(&mut socket, &json!({"type": "stop"}));
+    assert_eq!(receive_kind(&mut socket, "end")["end_reason"], "stopped");
+    live.wait(Duration::from_secs(20));
+    let s = live.summary();
+    assert_eq!(s["end_reason"], "stopped");
+    assert_eq!(s["per_rank"].as_array().unwrap().len(), 2, "{s}");
+}
+
 /// Bound beyond loopback, the page and the WebSocket need the printed
 /// URL's token.
 #[test]
