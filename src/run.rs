@@ -732,7 +732,12 @@ pub fn run_driven(
         None if checkpoint_stride.is_some() => format!("{f}; no checkpoint was written before it"),
         None => f,
     });
-    notes.extend(driver.finish(&world, end_reason)?);
+    let ended_by = if failure.is_some() {
+        "failed"
+    } else {
+        end_reason
+    };
+    notes.extend(driver.finish(&world, ended_by)?);
     if let Some((p, t)) = &last_good {
         if checkpoint_stride.is_some() || ENDED_BY_A_PERSON.contains(&end_reason) {
             notes.push(format!("last checkpoint: {} (t = {t} s)", p.display()));
