@@ -195,3 +195,36 @@ fn ctrl_c_to_mpirun_keeps_the_run_of_every_rank() {
     assert!(!status.success(), "{status:?}");
     assert_eq!(s["per_rank"].as_array().unwrap().len(), 2, "{s}");
 }
+
+/// A second Ctrl-C does not wait for the step under way: the process ends
+/// at once, with the same status and without a summary. The scene is the
+/// 300-body pour (`scripts/crowd.sh`'s `crowd_of 300`), whose steps take
+/// tens of milliseconds while it pours, far longer than the 5 ms between
+/// the signals.
+#[test]
+fn a_second_ctrl_c_ends_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let thesis = std::fs::read_to_string(common::bundled("nuts_and_bolts.toml")).unwrap();
+    let pour: String = thesis
+        .split_inclusive('\n')
+        .take_while(|l| !l.starts_with("[render]"))
+        .map(|l| match l.split_whitespace().next() {
+            Some("count") => "count = 300\n",
+            _ => l,
+        })
+        .collect();
+    let scene = dir.path().join("pour300.toml");
+    std::fs::write(&scene, pour).unwrap();
+    let out = dir.path().join("twice");
+    let mut child = start(None, &scene, &out, &[]);
+    std::thread::sleep(Duration::from_millis(2500));
+    signal(&child, libc::SIGINT);
+    std::thread::sleep(Duration::from_millis(5));
+    signal(&child, libc::SIGINT);
+    let status = wait(&mut child, Duration::from_secs(20));
+    assert_eq!(status.code(), Some(130), "{status:?}");
+    assert!(
+        !out.join("summary.json").exists(),
+        "the second Ctrl-C waited for the outputs"
+    );
+}
