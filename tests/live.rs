@@ -785,3 +785,46 @@ fn a_resumed_live_run_keeps_its_hands_and_replays_whole() {
     assert_eq!(whole["steps"], s["steps"]);
     assert_eq!(whole["state_hash"], s["state_hash"]);
 }
+
+/// A bad `inputs.jsonl` is refused before any step, as a bad scene is:
+/// exit status 2 and one line naming the file, the line and what is wrong;
+/// `live` does not take `--inputs`.
+#[test]
+fn a_bad_inputs_file_is_refused_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::bundled("render_check.toml");
+    for (text, says) in [
+        (
+            "{\"step\":1,\"type\":\"pause\"}\n{\"step\":2,\"type\":\"fly\"}\n",
+            "line 2: unknown variant `fly`",
+        ),
+        (
+            "{\"step\":1,\"hand\":1,\"type\":\"grab\",\"body\":5,\"point\":[0,0,0]}\n",
+            "line 1: body: no body 5",
+        ),
+        (
+            "{\"step\":9,\"type\":\"pause\"}\n{\"step\":3,\"type\":\"resume\"}\n",
+            "line 2: step 3 comes before",
+        ),
+        ("{\"type\":\"pause\"}\n", "line 1: no \"step\""),
+        ("", "no inputs and no \"end\" line"),
+    ] {
+        let inputs = dir.path().join("inputs.jsonl");
+        std::fs::write(&inputs, text).unwrap();
+        let o = common::rigidsim(&[
+            "run",
+            scene.to_str().unwrap(),
+            "--inputs",
+            inputs.to_str().unwrap(),
+            "--no-render",
+            "--out",
+            dir.path().join("out").to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{text}: {stderr}");
+        assert!(stderr.contains(says), "{text}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    }
+    let o = common::rigidsim(&["live", scene.to_str().unwrap(), "--inputs", "x.jsonl"]);
+    assert_eq!(o.status.code(), Some(2));
+}
