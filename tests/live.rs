@@ -828,3 +828,29 @@ fn a_bad_inputs_file_is_refused_with_its_line() {
     let o = common::rigidsim(&["live", scene.to_str().unwrap(), "--inputs", "x.jsonl"]);
     assert_eq!(o.status.code(), Some(2));
 }
+
+/// `--duration` ends a live run by itself, no sooner than the wall clock
+/// allows: 0.5 simulated seconds take at least 0.5 s.
+#[test]
+fn a_live_run_ends_at_its_duration_on_the_wall_clock() {
+    let dir = tempfile::tempdir().unwrap();
+    let started = Instant::now();
+    let mut live = Live::start(
+        &common::bundled("render_check.toml"),
+        &dir.path().join("duration"),
+        &["--duration", "0.5"],
+    );
+    assert!(live.wait(Duration::from_secs(20)).success());
+    let wall = started.elapsed().as_secs_f64();
+    let s = live.summary();
+    assert_eq!(s["end_reason"], "duration");
+    assert_eq!(s["sim_time_s"], 0.5);
+    assert!(wall >= 0.5, "0.5 s simulated in {wall:.3} s of wall time");
+    // Sampled at the frame interval (1/60 s: every second step of 0.01 s,
+    // 26 samples of 2 bodies with t = 0), not at every step (51 samples).
+    let rows = std::fs::read_to_string(live.out.join("trajectory.csv"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(rows, 2 * 26 + 1, "{rows} rows with the header");
+}
