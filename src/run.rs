@@ -469,6 +469,10 @@ pub trait Driver {
     }
     /// After each step (before its sample and any checkpoint).
     fn after_step(&mut self, _world: &mut World) {}
+    /// The run ended at a step boundary without a failure, before its end
+    /// sample and checkpoint: what was due at this last boundary and acts
+    /// on the world without a step (a recorded reset) acts now.
+    fn at_end(&mut self, _world: &mut World) {}
     /// The run ended at `world.steps` for `end_reason` (outputs not yet
     /// written): notes for the summary.
     fn finish(&mut self, _world: &World, _end_reason: &str) -> Result<Vec<String>, RunError> {
@@ -712,6 +716,9 @@ pub fn run_driven(
         worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
     }
     progress.finish();
+    if failure.is_none() {
+        driver.at_end(&mut world);
+    }
     if failure.is_none() {
         // The end row (if the last step was not a sample). After a failure
         // the state is the broken one: the trajectory ends at the last good

@@ -854,3 +854,47 @@ fn a_live_run_ends_at_its_duration_on_the_wall_clock() {
         .count();
     assert_eq!(rows, 2 * 26 + 1, "{rows} rows with the header");
 }
+
+/// Inputs taken at the boundary a live run stops at act on the state it
+/// ends with (a reset before a stop, while paused, so that all three are
+/// taken at one boundary), and the replay applies them there too.
+#[test]
+fn a_reset_just_before_the_stop_replays_to_the_same_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::bundled("render_check.toml");
+    let mut live = Live::start(&scene, &dir.path().join("last"), &[]);
+    let mut socket = live.connect();
+    receive_kind(&mut socket, "scene");
+    while receive_kind(&mut socket, "state")["t"].as_f64().unwrap() < 0.6 {}
+    send(&mut socket, &json!({"type": "pause"}));
+    while receive_kind(&mut socket, "state")["paused"] != true {}
+    send(&mut socket, &json!({"type": "reset"}));
+    send(&mut socket, &json!({"type": "stop"}));
+    assert!(live.wait(Duration::from_secs(10)).success());
+    let s = live.summary();
+    let inputs = std::fs::read_to_string(live.out.join("inputs.jsonl")).unwrap();
+    let steps: Vec<u64> = inputs
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<Value>(l).unwrap()["step"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert!(steps.iter().skip(1).all(|&x| x == steps[1]), "{inputs}");
+    let o = common::command(env!("CARGO_BIN_EXE_rigidsim"))
+        .arg("run")
+        .arg(&scene)
+        .arg("--inputs")
+        .arg(live.out.join("inputs.jsonl"))
+        .args(["--no-render", "--no-progress", "--out"])
+        .arg(dir.path().join("replayed"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{o:?}");
+    let r: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("replayed/summary.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(r["state_hash"], s["state_hash"], "{inputs}");
+}

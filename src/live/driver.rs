@@ -28,6 +28,9 @@ pub struct LiveDriver {
     shared: Arc<Shared>,
     server: Option<Server>,
     hands: Hands,
+    /// A resumed live run's recorded inputs of its checkpoint's step, to
+    /// apply again at its first boundary.
+    again: Vec<Record>,
     record: BufWriter<std::fs::File>,
     record_path: PathBuf,
     recorded: u64,
@@ -60,11 +63,13 @@ impl LiveDriver {
         std::fs::create_dir_all(out_dir)
             .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
         let record_path = out_dir.join(inputs::FILE_NAME);
+        // Those of the checkpoint's own step are applied again at the first
+        // boundary, as a replay of the whole file applies them there.
         let earlier: Vec<Record> = match resumed_at {
             Some(step) if record_path.is_file() => inputs::read(&record_path, scene)?
                 .records
                 .into_iter()
-                .filter(|r| r.step < step)
+                .filter(|r| r.step <= step)
                 .collect(),
             _ => Vec::new(),
         };
@@ -72,10 +77,15 @@ impl LiveDriver {
             .map(BufWriter::new)
             .map_err(|e| format!("cannot create {}: {e}", record_path.display()))?;
         let mut hands = Hands::new(scene);
+        let mut again = Vec::new();
         for r in &earlier {
             writeln!(record, "{}", r.line())
                 .map_err(|e| format!("{}: {e}", record_path.display()))?;
-            hands.restore(r);
+            if Some(r.step) == resumed_at {
+                again.push(r.clone());
+            } else {
+                hands.restore(r);
+            }
         }
         let (input_tx, input_rx) = mpsc::channel();
         let (state_tx, state_rx) = watch::channel::<Arc<str>>(Arc::from(""));
@@ -108,6 +118,7 @@ impl LiveDriver {
             shared,
             server: Some(server),
             hands,
+            again,
             record,
             record_path,
             recorded: earlier.len() as u64,
@@ -232,6 +243,9 @@ impl Driver for LiveDriver {
         world: &mut World,
         exec: &mut dyn Executor,
     ) -> Result<Option<&'static str>, RunError> {
+        for r in std::mem::take(&mut self.again) {
+            self.hands.apply(world, r.hand, &r.input);
+        }
         if world.steps == 0 || self.last_state.is_none() {
             self.pacer.resume(world.time());
             self.publish(world, true);

@@ -3,7 +3,10 @@
 //! run ends on the live run's state hash, on any number of ranks. It never
 //! ends by coming to rest (the live run did not); it ends at the recorded
 //! last step, or at `--duration` when given. Resumed from a checkpoint, it
-//! applies the inputs from the checkpoint's step on.
+//! takes up the hands the earlier inputs left holding and applies the
+//! inputs from the checkpoint's step on (those of that very step again: a
+//! checkpoint is the state before its boundary's inputs, or, where a live
+//! run stopped there, a state they leave as it is when applied again).
 
 use super::inputs::{Hands, Recording};
 use rigidsim::run::{Driver, RunError};
@@ -70,6 +73,18 @@ impl Driver for Replay {
         }
         self.hands.forces_for_next_step(world, exec);
         Ok(None)
+    }
+
+    /// The live run took the inputs of its last boundary before it ended
+    /// (a reset before a stop acted on the state it ended with).
+    fn at_end(&mut self, world: &mut World) {
+        let records = &self.recording.records;
+        while self.next < records.len() && records[self.next].step == world.steps {
+            let r = &records[self.next];
+            self.hands.apply(world, r.hand, &r.input);
+            self.next += 1;
+            self.applied += 1;
+        }
     }
 
     fn after_step(&mut self, world: &mut World) {
