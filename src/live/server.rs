@@ -158,21 +158,14 @@ pub fn start_live(addr: SocketAddr, shared: Arc<Shared>) -> std::io::Result<Serv
 /// 127.0.0.1:`port` until the process ends; prints the address first.
 pub fn serve_page(page: Vec<u8>, port: u16) -> std::io::Result<()> {
     let page = Arc::new(page);
+    let only_get = || async { plain(StatusCode::METHOD_NOT_ALLOWED, "only GET\n") };
+    let the_page = || {
+        let page = Arc::clone(&page);
+        get(move || async move { replay_page(&page) }).fallback(only_get)
+    };
     let router = Router::new()
-        .route(
-            "/",
-            get({
-                let page = Arc::clone(&page);
-                move || async move { replay_page(&page) }
-            }),
-        )
-        .route(
-            "/replay.html",
-            get({
-                let page = Arc::clone(&page);
-                move || async move { replay_page(&page) }
-            }),
-        )
+        .route("/", the_page())
+        .route("/replay.html", the_page())
         .fallback(|method: Method| async move {
             if method == Method::GET || method == Method::HEAD {
                 plain(StatusCode::NOT_FOUND, "not found: the replay is at /\n")
