@@ -46,6 +46,28 @@ check "replay page in headless chromium" bash -c "$bin scenes/render_check.toml 
   $bin view scenes/render_check.toml $tmp/replay >/dev/null && \
   node viewer/test/replay_in_chromium.mjs --page $tmp/replay/replay.html --run $tmp/replay --body 1"
 
+# The live page (`rigidsim live`) in a real browser: headless Chromium opens
+# the page of a live run, grabs the cube with the mouse and drags it up (the
+# states show it rising), lets go and stops the run from the page, which then
+# ends with its outputs (docs/live.md).
+live_page() {
+  "$bin" live scenes/render_check.toml --port 0 --no-render --out "$tmp/live" >"$tmp/live.url" 2>"$tmp/live.log" &
+  local pid=$! url=""
+  for _ in $(seq 100); do
+    url=$(head -1 "$tmp/live.url" 2>/dev/null || true)
+    [ -n "$url" ] && break
+    sleep 0.1
+  done
+  if node viewer/test/live_in_chromium.mjs --url "$url" --body 1 && wait "$pid" &&
+    grep -q '"end_reason": "stopped"' "$tmp/live/summary.json"; then
+    return 0
+  fi
+  kill "$pid" 2>/dev/null || true
+  cat "$tmp/live.log"
+  return 1
+}
+check "live page in headless chromium" live_page
+
 # A lab in a box (scripts/lab.sh): 2 "PCs", mpirun over ssh and TCP only,
 # every stage distributed: the same state hash as one rank, and each rank
 # reports its own host. Then a PC's processes killed, and a PC's cable

@@ -13,6 +13,7 @@ pub mod collision;
 pub mod contact;
 pub mod dynamics;
 pub mod export;
+pub mod interrupt;
 pub mod math;
 pub mod output;
 pub mod render;

@@ -1,16 +1,19 @@
 //! `rigidsim [run] SCENE.toml [options]`, alone or under `mpirun -np N`,
+//! `rigidsim live SCENE.toml [--port P] [--bind ADDR] [options]`, alike,
 //! `rigidsim export SCENE.toml --to FILE` and
 //! `rigidsim view SCENE.toml OUT_DIR [--serve PORT]`.
 //!
-//! Each subcommand is one function below; only `run` starts MPI, so the
-//! others work without mpirun. `rigidsim SCENE …` (no subcommand) is
+//! Each subcommand is one function below; only `run` and `live` start MPI,
+//! so the others work without mpirun. `rigidsim SCENE …` (no subcommand) is
 //! `rigidsim run SCENE …`, the form every script used before subcommands.
 //!
 //! Exit status: 0 done, 2 bad input (scene, mesh, options, a refused
 //! `--resume` checkpoint, an output folder `view` refuses), 3 the run went
 //! numerically wrong (outputs written so far and the last checkpoint are
-//! kept), 1 anything else.
+//! kept), 130 or 143 ended by SIGINT or SIGTERM (outputs and a checkpoint
+//! written, `rigidsim::interrupt`), 1 anything else.
 
+mod live;
 mod view;
 
 use clap::{Args, Parser, Subcommand};
@@ -20,7 +23,10 @@ use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
 use rigidsim::output::checkpoint::Checkpoint;
 use rigidsim::output::summary::RankHost;
 use rigidsim::output::trajectory;
-use rigidsim::run::{self, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunError, RunOptions};
+use rigidsim::run::{
+    self, Driver, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunError, RunOptions,
+    Unattended,
+};
 use rigidsim::step::{Executor, Inline};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -48,6 +54,12 @@ struct Cli {
 enum Command {
     /// Simulate a scene, alone or under mpirun (the default command).
     Run(RunArgs),
+    /// Simulate a scene at the pace of the wall clock, seen and pushed from a browser.
+    ///
+    /// Alone or under mpirun; the page at http://ADDR:PORT/, its WebSocket
+    /// at /ws (docs/live.md). Ends on Ctrl-C, --duration, or a stop from the
+    /// page, with the outputs of `run` and OUT/inputs.jsonl.
+    Live(LiveArgs),
     /// Write a scene's bodies, exactly as rigidsim simulates them, as JSON (no MPI).
     Export(ExportArgs),
     /// Write OUT_DIR/replay.html, a replay of a finished run of the scene for
@@ -116,6 +128,25 @@ struct RunArgs {
     /// The trajectory in the output folder, if any, continues from its time.
     #[arg(long, value_name = "FILE")]
     resume: Option<PathBuf>,
+    /// Apply a live run's inputs (its OUT/inputs.jsonl) at the steps it
+    /// took them: the run ends on the live run's state, at its last step (or
+    /// at --duration), never by coming to rest.
+    #[arg(long, value_name = "FILE")]
+    inputs: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct LiveArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// Port of the page and its WebSocket (0: any free port; the URL is
+    /// printed either way).
+    #[arg(long, default_value_t = 8080)]
+    port: u16,
+    /// Address to listen on. Beyond loopback, every request must carry the
+    /// random token of the printed URL.
+    #[arg(long, default_value = "127.0.0.1")]
+    bind: std::net::IpAddr,
 }
 
 #[derive(Args, Debug)]
@@ -162,7 +193,19 @@ fn main() -> ExitCode {
         }
     };
     match (cli.command, cli.run) {
-        (Some(Command::Run(args)), _) | (None, Some(args)) => run_scene(args),
+        (Some(Command::Run(args)), _) | (None, Some(args)) => run_scene(args, None),
+        (Some(Command::Live(args)), _) => {
+            if args.run.inputs.is_some() {
+                eprintln!(
+                    "rigidsim: error: --inputs replays a live run: rigidsim run SCENE --inputs FILE"
+                );
+                return ExitCode::from(2);
+            }
+            let live = LiveServer {
+                addr: std::net::SocketAddr::new(args.bind, args.port),
+            };
+            run_scene(args.run, Some(live))
+        }
         (Some(Command::Export(args)), _) => export_scene(args),
         (Some(Command::View(args)), _) => view_run(args),
         (None, None) => {
@@ -323,8 +366,14 @@ impl Drop for MpiTempDir {
     }
 }
 
-/// `rigidsim run` (and the short form): every rank of the MPI job, or the only one.
-fn run_scene(cli: RunArgs) -> ExitCode {
+/// Where `rigidsim live` serves its page and WebSocket.
+struct LiveServer {
+    addr: std::net::SocketAddr,
+}
+
+/// `rigidsim run` (and the short form), and `rigidsim live` (with `live`):
+/// every rank of the MPI job, or the only one.
+fn run_scene(cli: RunArgs, live: Option<LiveServer>) -> ExitCode {
     // Declared before the universe, so removed after MPI has finalised.
     let _mpi_temp = open_mpi_defaults();
     let Some(universe) = mpi::initialize() else {
@@ -339,6 +388,14 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             eprintln!("rigidsim: {msg}");
         }
     };
+    // Every rank takes Ctrl-C and SIGTERM (under mpirun each gets one):
+    // rank 0 ends the run at the next step boundary, the others keep
+    // answering it until it does (`rigidsim::interrupt`).
+    if let Err(e) = rigidsim::interrupt::install() {
+        say(&format!(
+            "warning: Ctrl-C will end the run where it stands: {e}"
+        ));
+    }
 
     // Every rank loads the scene itself; they all fail alike on bad input,
     // and only rank 0 says so.
@@ -349,7 +406,8 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         sample_every: cli.sample_every,
         speculative_speed: cli.speculative_speed,
         no_render: cli.no_render,
-        no_progress: cli.no_progress,
+        // A live run prints its address, not a bar.
+        no_progress: cli.no_progress || live.is_some(),
         no_sleep: cli.no_sleep,
         split_groups: cli.split_groups,
         checkpoint_every: cli.checkpoint_every,
@@ -364,6 +422,12 @@ fn run_scene(cli: RunArgs) -> ExitCode {
     if let Err(e) = run::apply_overrides(&mut scene, &opts) {
         say(&format!("error: {e}"));
         return ExitCode::from(2);
+    }
+    // A live run may last hours: its trajectory is sampled at the scene's
+    // `sample_every` where given, otherwise at the frame interval, not at
+    // every step (docs/live.md states what an hour costs on disk).
+    if live.is_some() && scene.settings.sample_every.is_none() {
+        scene.settings.sample_every = Some(scene.settings.frame_interval);
     }
     // `--resume`: rank 0 reads the checkpoint and checks it against the scene,
     // then tells every rank whether to go on, so that a refused checkpoint
@@ -400,6 +464,38 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             return ExitCode::from(code as u8);
         }
     }
+    // `--inputs` and `live`: rank 0 reads the recording or starts the
+    // server, and tells every rank whether to go on (as for `--resume`).
+    let mut recording = None;
+    let mut live_driver = None;
+    if cli.inputs.is_some() || live.is_some() {
+        let mut code: i32 = 0;
+        if rank == 0 {
+            let started = match (&cli.inputs, &live) {
+                (Some(path), _) => live::inputs::read(path, &scene)
+                    .map(|r| recording = Some(r))
+                    .map_err(|e| (e, 2)),
+                (None, Some(l)) => start_live(
+                    &scene,
+                    &out_dir,
+                    l,
+                    opts.duration.is_some(),
+                    resume.as_ref().map(|ck| ck.steps),
+                )
+                .map(|s| live_driver = Some(s))
+                .map_err(|e| (e, 1)),
+                (None, None) => Ok(()),
+            };
+            if let Err((e, c)) = started {
+                say(&format!("error: {e}"));
+                code = c;
+            }
+        }
+        world.process_at_rank(0).broadcast_into(&mut code);
+        if code != 0 {
+            return ExitCode::from(code as u8);
+        }
+    }
     if let Some(dir) = &cli.capture_islands {
         if let Err(e) = rigidsim::output::capture::start(dir.clone(), cli.capture_min_rows, rank) {
             say(&format!("error: --capture-islands {}: {e}", dir.display()));
@@ -426,7 +522,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
         } else {
             cluster::worker_loop(&world, &scene, cluster::slow_factor(&cli.slow_rank, rank));
         }
-        return ExitCode::SUCCESS;
+        return interrupted_status().unwrap_or(ExitCode::SUCCESS);
     }
 
     let mut inline = Inline::default();
@@ -478,7 +574,26 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             vector_units: vector_units.get(r).cloned().unwrap_or_default(),
         })
         .collect();
-    let outcome = run::run_coordinator(scene, &opts, &out_dir, exec, &mut *frames, resume, &hosts);
+    let mut unattended = Unattended;
+    let mut replay;
+    let driver: &mut dyn Driver = match (&mut live_driver, recording) {
+        (Some(s), _) => s,
+        (None, Some(r)) => {
+            replay = live::replay::Replay::new(&scene, r, opts.duration.is_some());
+            &mut replay
+        }
+        (None, None) => &mut unattended,
+    };
+    let outcome = run::run_driven(
+        scene,
+        &opts,
+        &out_dir,
+        exec,
+        &mut *frames,
+        resume,
+        &hosts,
+        driver,
+    );
     if let Some(why) = frames.lost() {
         // The results are written; a rank that does not answer would hang
         // MPI's finalize, so the job ends here (mpirun names the ranks).
@@ -499,7 +614,7 @@ fn run_scene(cli: RunArgs) -> ExitCode {
                 summary.end_reason,
                 out_dir.display()
             );
-            ExitCode::SUCCESS
+            interrupted_status().unwrap_or(ExitCode::SUCCESS)
         }
         Err(RunError::Failed(msg)) => {
             eprintln!(
@@ -513,4 +628,38 @@ fn run_scene(cli: RunArgs) -> ExitCode {
             world.abort(1);
         }
     }
+}
+
+/// 130 after Ctrl-C, 143 after SIGTERM (the shell's status for a process the
+/// signal ended), once the run has kept its work; `None` without a signal.
+fn interrupted_status() -> Option<ExitCode> {
+    rigidsim::interrupt::requested()
+        .map(|sig| ExitCode::from(rigidsim::interrupt::exit_status(sig) as u8))
+}
+
+/// Starts a live run's server (rank 0) and prints its URL on stdout.
+fn start_live(
+    scene: &rigidsim::scene::Scene,
+    out_dir: &std::path::Path,
+    live: &LiveServer,
+    bounded: bool,
+    resumed_at: Option<u64>,
+) -> Result<live::driver::LiveDriver, String> {
+    let token = if live.addr.ip().is_loopback() {
+        None
+    } else {
+        Some(live::server::random_token().map_err(|e| format!("no random token: {e}"))?)
+    };
+    let driver =
+        live::driver::LiveDriver::start(scene, out_dir, live.addr, token, bounded, resumed_at)?;
+    use std::io::Write;
+    println!("{}", driver.url);
+    let _ = std::io::stdout().flush();
+    eprintln!(
+        "rigidsim: live run of {} at {} (Ctrl-C, or stop on the page, ends it; results in {})",
+        scene.name,
+        driver.url,
+        out_dir.display()
+    );
+    Ok(driver)
 }

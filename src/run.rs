@@ -453,6 +453,51 @@ impl FrameSink for InlineFrames {
     }
 }
 
+/// What acts on a run between its steps besides the scene itself: nothing
+/// for a plain run (`Unattended`); a person's inputs for a live run or
+/// a recorded one (`rigidsim live`, `rigidsim run --inputs`).
+pub trait Driver {
+    /// The step the run ends at, given the scene's (`Settings::total_steps`).
+    fn total_steps(&self, scene_steps: u64) -> u64 {
+        scene_steps
+    }
+    /// Whether the run may end by coming to rest (a scene's `until_rest`).
+    /// A person may still act on a world at rest, so a driven run does not.
+    fn ends_at_rest(&self) -> bool {
+        true
+    }
+    /// At the boundary before the next step (`world.steps` done): applies
+    /// what is due there. `Some(reason)` ends the run at this boundary,
+    /// with that `end_reason`.
+    fn before_step(
+        &mut self,
+        _world: &mut World,
+        _exec: &mut dyn Executor,
+    ) -> Result<Option<&'static str>, RunError> {
+        Ok(None)
+    }
+    /// After each step (before its sample and any checkpoint).
+    fn after_step(&mut self, _world: &mut World) {}
+    /// The run ended at a step boundary without a failure, before its end
+    /// sample and checkpoint: what was due at this last boundary and acts
+    /// on the world without a step (a recorded reset) acts now.
+    fn at_end(&mut self, _world: &mut World) {}
+    /// The run ended at `world.steps` for `end_reason` (outputs not yet
+    /// written): notes for the summary.
+    fn finish(&mut self, _world: &World, _end_reason: &str) -> Result<Vec<String>, RunError> {
+        Ok(Vec::new())
+    }
+}
+
+/// A plain run: nothing acts on it but the scene.
+pub struct Unattended;
+
+impl Driver for Unattended {}
+
+/// The `end_reason`s that leave a checkpoint whatever `--checkpoint-every`
+/// says: the run was ended by a person, and `--resume` continues it.
+const ENDED_BY_A_PERSON: [&str; 2] = ["interrupted", "stopped"];
+
 /// Why a run stopped early.
 #[derive(Debug)]
 pub enum RunError {
@@ -474,6 +519,32 @@ pub fn run_coordinator(
     frames: &mut dyn FrameSink,
     resume: Option<Checkpoint>,
     hosts: &[RankHost],
+) -> Result<Summary, RunError> {
+    run_driven(
+        scene,
+        opts,
+        out_dir,
+        exec,
+        frames,
+        resume,
+        hosts,
+        &mut Unattended,
+    )
+}
+
+/// `run_coordinator` with a `Driver` acting between the steps. A signal
+/// (`crate::interrupt`) ends the run at the next step boundary with
+/// `end_reason = "interrupted"`.
+#[allow(clippy::too_many_arguments)]
+pub fn run_driven(
+    scene: Scene,
+    opts: &RunOptions,
+    out_dir: &Path,
+    exec: &mut dyn Executor,
+    frames: &mut dyn FrameSink,
+    resume: Option<Checkpoint>,
+    hosts: &[RankHost],
+    driver: &mut dyn Driver,
 ) -> Result<Summary, RunError> {
     let io = |e: std::io::Error, what: &str| RunError::Io(format!("{what}: {e}"));
     std::fs::create_dir_all(out_dir)
@@ -528,7 +599,8 @@ pub fn run_coordinator(
         .map(|c| ((c / settings.dt).round() as u64).max(1));
     let dt = settings.dt;
     let end_time = settings.end_time();
-    let total_steps = settings.total_steps();
+    let total_steps = driver.total_steps(settings.total_steps());
+    let until_rest = settings.until_rest && driver.ends_at_rest();
     let sample_every = settings.sample_every.unwrap_or(dt);
     let sample_stride = ((sample_every / dt).round() as u64).max(1);
     let frame_stride = ((settings.frame_interval / dt).round() as u64).max(1);
@@ -590,7 +662,9 @@ pub fn run_coordinator(
             energy_initial,
             frame_index,
             frame_digests: frame_digests.to_vec(),
-            trajectory: traj.mark(),
+            trajectory: traj
+                .mark_read_back(&traj_path)
+                .map_err(|e| io(e, &traj_path.display().to_string()))?,
         };
         ck.write(&checkpoint_path)
             .map_err(|e| io(e, &checkpoint_path.display().to_string()))?;
@@ -600,14 +674,23 @@ pub fn run_coordinator(
     let mut end_reason = "duration";
     let mut failure = None;
     while world.steps < total_steps {
-        if settings.until_rest && world.steps > 0 && world.at_rest() {
+        if crate::interrupt::requested().is_some() {
+            end_reason = "interrupted";
+            break;
+        }
+        if until_rest && world.steps > 0 && world.at_rest() {
             end_reason = "rest";
+            break;
+        }
+        if let Some(reason) = driver.before_step(&mut world, exec)? {
+            end_reason = reason;
             break;
         }
         if let Err(f) = world.step(exec) {
             failure = Some(f.to_string());
             break;
         }
+        driver.after_step(&mut world);
         let s = world.steps;
         if s % sample_stride == 0 || s == total_steps {
             traj.sample(world.time(), &world.bodies, &world.scene.objects)
@@ -634,7 +717,7 @@ pub fn run_coordinator(
             progress.update(world.time(), awake, world.bodies.len());
         }
     }
-    if failure.is_none() && end_reason == "duration" && settings.until_rest && world.at_rest() {
+    if failure.is_none() && end_reason == "duration" && until_rest && world.at_rest() {
         end_reason = "rest";
     }
     if world.steps % frame_stride != 0 {
@@ -642,6 +725,9 @@ pub fn run_coordinator(
         worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
     }
     progress.finish();
+    if failure.is_none() {
+        driver.at_end(&mut world);
+    }
     if failure.is_none() {
         // The end row (if the last step was not a sample). After a failure
         // the state is the broken one: the trajectory ends at the last good
@@ -651,7 +737,8 @@ pub fn run_coordinator(
         let written_now = last_good
             .as_ref()
             .is_some_and(|(p, t)| *p == checkpoint_path && *t == world.time());
-        if checkpoint_stride.is_some() && !written_now {
+        let keep = checkpoint_stride.is_some() || ENDED_BY_A_PERSON.contains(&end_reason);
+        if keep && !written_now {
             last_good = write_checkpoint(&world, frame_index, &frame_digests, &mut traj)?;
         }
     }
@@ -661,8 +748,14 @@ pub fn run_coordinator(
         None if checkpoint_stride.is_some() => format!("{f}; no checkpoint was written before it"),
         None => f,
     });
+    let ended_by = if failure.is_some() {
+        "failed"
+    } else {
+        end_reason
+    };
+    notes.extend(driver.finish(&world, ended_by)?);
     if let Some((p, t)) = &last_good {
-        if checkpoint_stride.is_some() {
+        if checkpoint_stride.is_some() || ENDED_BY_A_PERSON.contains(&end_reason) {
             notes.push(format!("last checkpoint: {} (t = {t} s)", p.display()));
         }
     }

@@ -1,7 +1,8 @@
 // Bundles src/main.js with three.js and its orbit controls into one script,
 // dist/viewer.js, which `rigidsim view` inlines into every replay page
-// (src/view/page.rs compiles it into the binary), and copies three.js's
-// licence beside it. After changing src/main.js or the three.js version:
+// (src/view/page.rs compiles it into the binary), and src/live.js likewise
+// into dist/live.js, the live page of `rigidsim live` (src/live/page.rs),
+// and copies three.js's licence beside them. After changing src/main.js or the three.js version:
 //   npm ci && npm run build     (here, in viewer/), then commit dist/.
 // The Rust build then needs no npm. `node build.mjs --check` builds in memory
 // and fails if dist/ is not what the sources give (scripts/test.sh runs it).
@@ -25,43 +26,57 @@ const renameXrWord = {
   },
 };
 
-const OUT = 'dist/viewer.js';
+// Each page's script: the replay's (`rigidsim view`, src/view/page.rs) and
+// the live page's (`rigidsim live`, src/live/page.rs).
+const BUNDLES = [
+  { entry: 'src/main.js', out: 'dist/viewer.js', what: 'viewer' },
+  { entry: 'src/live.js', out: 'dist/live.js', what: 'live page' },
+];
 const LICENCE = 'dist/THREE_LICENSE';
 const checkOnly = process.argv.includes('--check');
-
-const result = await build({
-  entryPoints: ['src/main.js'],
-  bundle: true,
-  format: 'iife',
-  minify: true,
-  target: 'es2020',
-  // three.js's licence travels as dist/THREE_LICENSE, named in the first line.
-  legalComments: 'none',
-  write: false,
-  outfile: OUT,
-  plugins: [renameXrWord],
-});
 const three = JSON.parse(readFileSync('node_modules/three/package.json', 'utf8'));
-const code = result.outputFiles[0].text;
-// The page inlines the bundle in a <script> element, which would end at the
-// first `</script` and reads `<!--` specially: refuse a bundle with either.
-const lower = code.toLowerCase();
-if (lower.includes('</script') || lower.includes('<!--')) {
-  throw new Error(`the bundle contains </script or <!--, which cannot be inlined in a <script> element`);
-}
-if (XR_WORD.test(code)) throw new Error('the renamed WebXR word is still in the bundle');
-const bundle = `/* rigidsim viewer; includes three.js ${three.version} (MIT, see THREE_LICENSE) */\n${code}`;
 const licence = readFileSync('node_modules/three/LICENSE', 'utf8');
+
+async function bundle({ entry, out, what }) {
+  const result = await build({
+    entryPoints: [entry],
+    bundle: true,
+    format: 'iife',
+    minify: true,
+    target: 'es2020',
+    // three.js's licence travels as dist/THREE_LICENSE, named in the first line.
+    legalComments: 'none',
+    write: false,
+    outfile: out,
+    plugins: [renameXrWord],
+  });
+  const code = result.outputFiles[0].text;
+  // The page inlines the bundle in a <script> element, which would end at the
+  // first `</script` and reads `<!--` specially: refuse a bundle with either.
+  const lower = code.toLowerCase();
+  if (lower.includes('</script') || lower.includes('<!--')) {
+    throw new Error(`${out} contains </script or <!--, which cannot be inlined in a <script> element`);
+  }
+  if (XR_WORD.test(code)) throw new Error(`the renamed WebXR word is still in ${out}`);
+  return `/* rigidsim ${what}; includes three.js ${three.version} (MIT, see THREE_LICENSE) */\n${code}`;
+}
+
+const built = [];
+for (const b of BUNDLES) built.push([b.out, await bundle(b)]);
 
 if (checkOnly) {
   const same = (path, text) => existsSync(path) && readFileSync(path, 'utf8') === text;
-  if (!same(OUT, bundle) || !same(LICENCE, licence)) {
-    console.error(`viewer/${OUT} is not what viewer/src and three.js ${three.version} build: run npm run build in viewer/ and commit dist/`);
+  const stale = built.filter(([out, text]) => !same(out, text)).map(([out]) => `viewer/${out}`);
+  if (!same(LICENCE, licence)) stale.push(`viewer/${LICENCE}`);
+  if (stale.length) {
+    console.error(`${stale.join(', ')} not what viewer/src and three.js ${three.version} build: run npm run build in viewer/ and commit dist/`);
     process.exit(1);
   }
-  console.log(`viewer/${OUT} is built from viewer/src (three.js ${three.version})`);
+  console.log(`${built.map(([out]) => `viewer/${out}`).join(' and ')} built from viewer/src (three.js ${three.version})`);
 } else {
-  writeFileSync(OUT, bundle);
+  for (const [out, text] of built) {
+    writeFileSync(out, text);
+    console.log(`${out}: ${(text.length / 1024).toFixed(0)} KiB, three.js ${three.version}`);
+  }
   writeFileSync(LICENCE, licence);
-  console.log(`${OUT}: ${(bundle.length / 1024).toFixed(0)} KiB, three.js ${three.version}`);
 }

@@ -15,7 +15,7 @@ use crate::collision::narrowphase::{self, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::output::summary::{Distribution, RankSummary};
 use crate::run::{Frame, FrameRenderer, FrameSink};
-use crate::scene::Scene;
+use crate::scene::{ForceWindow, Scene};
 use crate::step::stats::StageClock;
 use crate::step::{
     Executor, GroupInput, GroupParams, GroupReply, Inline, PreparedPairs, SPLIT_AUTO_MIN_MEMBERS,
@@ -846,6 +846,18 @@ impl<'w> MpiExecutor<'w> {
 }
 
 impl Executor for MpiExecutor<'_> {
+    fn share_forces(&mut self, forces: &[ForceWindow]) {
+        let req = Req::Forces {
+            forces: forces.to_vec(),
+        };
+        for &w in &self.roles.workers.clone() {
+            self.send(w, &req);
+        }
+        for &w in &self.roles.workers.clone() {
+            let _ = self.receive(w);
+        }
+    }
+
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
         let reports = self.stop();
         (self.summaries(&reports), self.dist.clone())
@@ -1636,6 +1648,9 @@ pub fn hostname() -> String {
 pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
     let root = world.process_at_rank(0);
     let mut report = WorkerReport::default();
+    // The scene with the forces rank 0 last shared (`Req::Forces`), once it
+    // has shared any.
+    let mut shared: Option<Scene> = None;
     loop {
         let wait = Instant::now();
         let (bytes, _) = root.receive_vec_with_tag::<u8>(protocol::TAG_REQUEST);
@@ -1654,7 +1669,16 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
         } else {
             Duration::ZERO
         };
+        if let Req::Forces { forces } = req {
+            shared.get_or_insert_with(|| scene.clone()).forces = forces;
+            let out = encode(&Reply::Pong);
+            report.bytes_sent += out.len() as u64;
+            root.send_with_tag(&out[..], protocol::TAG_REPLY);
+            continue;
+        }
+        let scene = shared.as_ref().unwrap_or(scene);
         let reply = match req {
+            Req::Forces { .. } => unreachable!("answered above"),
             Req::Ping => Reply::Pong,
             Req::Probe { payload } => {
                 // Not the run's traffic (see `Req::Probe`).

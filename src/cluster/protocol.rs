@@ -8,6 +8,7 @@
 use crate::collision::narrowphase::{PairResult, PairTask};
 use crate::contact::solver::{IslandResult, IslandTask};
 use crate::run::Frame;
+use crate::scene::ForceWindow;
 use crate::step::{GroupInput, GroupParams, GroupReply, PreparedPairs};
 use serde::{Deserialize, Serialize};
 
@@ -54,6 +55,11 @@ pub enum Request {
         /// Per range: its group (an index into `inputs`) and its pairs.
         shares: Vec<(u32, (usize, usize))>,
     },
+    /// At a step boundary of a live run or a replay of one
+    /// (`Executor::share_forces`): the scene's external forces from now on,
+    /// all of them (its own `[[forces]]` and the hand's). The worker
+    /// answers `Pong`. Never sent by a plain run.
+    Forces { forces: Vec<ForceWindow> },
     /// Start-up latency probe: the worker answers `Pong` at once.
     Ping,
     /// Start-up link-rate probe (`MpiExecutor::measure_link_rates`): the

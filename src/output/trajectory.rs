@@ -256,6 +256,27 @@ impl TrajectoryWriter {
         self.mark
     }
 
+    /// What the file at `path` held at the last `flush`, as `mark` gives
+    /// it, also for a writer made with `Marking::Counted`: its hash is then
+    /// read back from the file. For the checkpoint of a run interrupted
+    /// without `--checkpoint-every` (`crate::interrupt`), once, at its end.
+    pub fn mark_read_back(&self, path: &Path) -> std::io::Result<TrajectoryMark> {
+        if self.marking == Marking::Hashed {
+            return Ok(self.mark);
+        }
+        let found = mark_of_prefix(&std::fs::File::open(path)?, self.mark.bytes)?;
+        if found.bytes != self.mark.bytes {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "holds {} bytes, {} were written",
+                    found.bytes, self.mark.bytes
+                ),
+            ));
+        }
+        Ok(found)
+    }
+
     /// The first write error the thread met, if any.
     fn check(&self) -> std::io::Result<()> {
         match self.failed.lock().unwrap().take() {
@@ -338,9 +359,10 @@ pub fn check_resumable(path: &Path, mark: TrajectoryMark) -> std::io::Result<()>
     }
 }
 
-fn check_prefix(file: &std::fs::File, mark: TrajectoryMark) -> std::io::Result<()> {
+/// The mark of the first `bytes` bytes of `file` (fewer if it is shorter).
+fn mark_of_prefix(file: &std::fs::File, bytes: u64) -> std::io::Result<TrajectoryMark> {
     let mut found = TrajectoryMark::start();
-    let mut reader = std::io::BufReader::new(file).take(mark.bytes);
+    let mut reader = std::io::BufReader::new(file).take(bytes);
     let mut buf = vec![0u8; 1 << 16];
     loop {
         let n = reader.read(&mut buf)?;
@@ -349,6 +371,11 @@ fn check_prefix(file: &std::fs::File, mark: TrajectoryMark) -> std::io::Result<(
         }
         found.add(&buf[..n]);
     }
+    Ok(found)
+}
+
+fn check_prefix(file: &std::fs::File, mark: TrajectoryMark) -> std::io::Result<()> {
+    let found = mark_of_prefix(file, mark.bytes)?;
     if found != mark {
         let why = if found.bytes < mark.bytes {
             format!(

@@ -162,7 +162,7 @@ pub fn default_fall_z(bodies: &[Body], objects: &[ObjectDef]) -> f64 {
 }
 
 /// An external force on one body over [start, end).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ForceWindow {
     pub body: BodyId,
     pub force: Vector3<f64>,

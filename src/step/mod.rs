@@ -49,7 +49,7 @@ pub use toi::{RATCHET_GAP, TOI_GAP};
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
-use crate::scene::Scene;
+use crate::scene::{ForceWindow, Scene};
 use nalgebra::{Point3, Vector3};
 use region::Region;
 use stats::{Distribution, GroupWork, RankSummary};
@@ -96,6 +96,11 @@ pub trait Executor {
     /// done with its chunk gets the next within microseconds. Changes no
     /// result.
     fn poll(&mut self) {}
+    /// The scene's external forces changed at a step boundary (a live
+    /// live run's hand, `run --inputs`): every rank that steps groups must
+    /// integrate with these from the next step on. Inline: nothing to do,
+    /// the step reads `World::scene`.
+    fn share_forces(&mut self, _forces: &[ForceWindow]) {}
     /// Ends the run on every rank; returns the per-rank accounts and how often
     /// each stage was distributed.
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution);

@@ -12,9 +12,9 @@
 //! and refuses a folder that `summary.json` says was written from another
 //! scene, or from another version of this one. No MPI.
 
-mod mesh;
+pub(crate) mod mesh;
 mod page;
-mod replay_data;
+pub(crate) mod replay_data;
 mod run_output;
 mod serve;
 

@@ -260,7 +260,7 @@ impl ReplayData {
 /// The floor grid: on the top of the widest fixed body (the floor of the
 /// bundled scenes) when there is one, else in the plane z = 0 under the
 /// bodies' starting places.
-fn floor(scene: &Scene) -> Floor {
+pub(crate) fn floor(scene: &Scene) -> Floor {
     let world_box = |body: &rigidsim::body::Body| {
         let o = &scene.objects[body.object.0 as usize];
         let pose = body.pose();
