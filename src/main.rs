@@ -83,9 +83,10 @@ struct RunArgs {
     /// Trajectory sampling interval in simulated seconds.
     #[arg(long)]
     sample_every: Option<f64>,
-    /// Approaches slower than this (m/s) are solved at the step by
-    /// speculative contacts; 0: every impact an exact event (overrides
-    /// world.speculative_speed; default g·dt/2).
+    /// The contact model's dial (m/s): approaches inside a pile up to this
+    /// speed, and any below g·dt/2, are solved at the step by speculative
+    /// contacts; 0: every impact an exact event (overrides
+    /// world.speculative_speed; default 0).
     #[arg(long)]
     speculative_speed: Option<f64>,
     /// Do not render, even if the scene has a [render] section.
