@@ -633,6 +633,8 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
         out.contact_force = vec![0.0; task.contacts.len()];
         out.contact_friction = vec![Vector3::zeros(); task.contacts.len()];
     }
+    let external_dv: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.external_dv).collect();
+    let external_dw: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.external_dw).collect();
     out.carried = task
         .contacts
         .iter()
@@ -640,7 +642,7 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
         .zip(&pushed)
         .map(|((c, &vn), &pushed)| {
             if pushed && closing_allowed(c, task.dt) > 0.0 {
-                meeting_speed(task, c, vn)
+                meeting_speed(task, c, vn, (&external_dv, &external_dw))
             } else {
                 0.0
             }
@@ -659,11 +661,15 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
 /// The normal speed at which a speculative contact's gap, closing at `vn`
 /// under the external forces' acceleration alone, would have closed to
 /// `SPECULATIVE_GAP`: the approach its deferred bounce restitutes from.
-fn meeting_speed(task: &IslandTask, c: &IslandContact, vn: f64) -> f64 {
+/// `external` is each body's velocity change from the external forces.
+fn meeting_speed(
+    task: &IslandTask,
+    c: &IslandContact,
+    vn: f64,
+    (dv, dw): (&[Vector3<f64>], &[Vector3<f64>]),
+) -> f64 {
     let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
-    let dv: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.external_dv).collect();
-    let dw: Vec<Vector3<f64>> = task.bodies.iter().map(|b| b.external_dw).collect();
-    let closing_accel = (-row.velocity(&dv, &dw) / task.dt).max(0.0);
+    let closing_accel = (-row.velocity(dv, dw) / task.dt).max(0.0);
     let gap = (c.separation - SPECULATIVE_GAP).max(0.0);
     -(vn * vn + 2.0 * closing_accel * gap).sqrt()
 }

@@ -175,10 +175,17 @@ impl Region<'_> {
     ) -> Solved {
         let clock = Instant::now();
         let n = self.bodies.len();
-        let piles = PileSizes::of(self, touching, members);
+        // Island sizes matter only to near points (none in the exact model).
+        let piles = touching
+            .iter()
+            .any(|t| !t.near.is_empty())
+            .then(|| PileSizes::of(self, touching, members));
         let points: Vec<Vec<ContactPoint>> = touching
             .iter()
-            .map(|t| self.solved_points(t, seg, &piles, h))
+            .map(|t| match &piles {
+                Some(piles) if !t.near.is_empty() => self.solved_points(t, seg, piles, h),
+                _ => t.points.clone(),
+            })
             .collect();
         let links: Vec<(BodyId, BodyId)> = touching
             .iter()
@@ -193,7 +200,7 @@ impl Region<'_> {
             let i = b.index();
             self.bodies[i].is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok()
         });
-        let restitution_threshold = 0.5 * self.st.settings.gravity.norm() * self.st.settings.dt;
+        let restitution_threshold = self.st.settings.restitution_threshold();
         let mut tasks = Vec::with_capacity(islands.len());
         // Per island, each contact's pair and point in A's body frame.
         let mut contact_pairs: Vec<Vec<ContactWhere>> = Vec::with_capacity(islands.len());
@@ -223,6 +230,7 @@ impl Region<'_> {
                 };
                 let reach = WARM_MATCH * oa.outer_radius();
                 for (k, p) in points[ci].iter().enumerate() {
+                    let near = k >= t.points.len();
                     let local = frame_a.transform_point(&p.point.into()).coords;
                     // Each point of the last solve warms one new point at most.
                     let nearest = last
@@ -248,17 +256,17 @@ impl Region<'_> {
                         // A speculative contact is frictionless: it pushes only where
                         // the gap would close past its target, and its friction rows
                         // would triple a pile's rows for a push that lasts a step.
-                        friction: if k < t.points.len() {
-                            rules.friction_rule.combine(oa.friction, ob.friction)
-                        } else {
+                        friction: if near {
                             0.0
+                        } else {
+                            rules.friction_rule.combine(oa.friction, ob.friction)
                         },
                         separation: p.separation,
                         warm_force,
                         warm_friction,
                         turns: p.turns,
                         approach,
-                        near: k >= t.points.len(),
+                        near,
                     });
                 }
             }
@@ -430,7 +438,7 @@ impl PileSizes {
 
 impl Region<'_> {
     /// A pair's points for its contact solve over the interval `h`: its
-    /// contacts, and those of its near points that may close within the
+    /// contacts, then those of its near points that may close within the
     /// interval and approach no faster than the speculative speed there
     /// (`Settings::slow_speed` anywhere, `speculative_speed` inside a
     /// pile). A faster approach is left to an exact impact event.
@@ -442,9 +450,6 @@ impl Region<'_> {
         h: f64,
     ) -> Vec<ContactPoint> {
         let mut points = t.points.clone();
-        if t.near.is_empty() {
-            return points;
-        }
         let settings = self.st.settings;
         // A body that turns more than `SPIN_TRUST` within the interval
         // moves its points off the straight lines a speculative row
@@ -476,10 +481,7 @@ impl Region<'_> {
             settings.slow_speed()
         };
         let reach = settings.gravity.norm() * h;
-        let velocity_at = |i: usize, p: &Vector3<f64>| {
-            self.body_at(i, seg[i].state)
-                .point_velocity(self.object(i), p)
-        };
+        let velocity_at = |i: usize, p: &Vector3<f64>| self.point_velocity(i, &seg[i].state, p);
         points.extend(t.near.iter().filter(|p| {
             let v = velocity_at(t.a.index(), &p.point) - velocity_at(t.b.index(), &p.point);
             let vn = p.normal.dot(&v);

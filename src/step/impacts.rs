@@ -548,8 +548,7 @@ fn approach_speed(
             .find(|(j, _)| *j == i)
             .map_or(seg[i].state, |(_, s)| *s)
     };
-    let velocity_at =
-        |i: usize, p: &Vector3<f64>| g.body_at(i, state_of(i)).point_velocity(g.object(i), p);
+    let velocity_at = |i: usize, p: &Vector3<f64>| g.point_velocity(i, &state_of(i), p);
     let Some(k) = pairs.iter().position(|&q| q == pair) else {
         return 0.0;
     };

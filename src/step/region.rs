@@ -185,6 +185,11 @@ impl<'s> Region<'s> {
     }
 
     /// Body `i` as it is in `state` (a segment's, or one integrated along it).
+    /// Velocity of body `i`'s material point at world position `p`, in `state`.
+    pub fn point_velocity(&self, i: usize, state: &BodyState, p: &Vector3<f64>) -> Vector3<f64> {
+        self.body_at(i, *state).point_velocity(self.object(i), p)
+    }
+
     pub fn body_at(&self, i: usize, state: BodyState) -> Body {
         Body {
             state,
@@ -277,10 +282,7 @@ impl<'s> Region<'s> {
         if !self.st.skip_separating {
             return PairMap::default();
         }
-        let velocity_at = |i: usize, p: &Vector3<f64>| {
-            self.body_at(i, seg[i].state)
-                .point_velocity(self.object(i), p)
-        };
+        let velocity_at = |i: usize, p: &Vector3<f64>| self.point_velocity(i, &seg[i].state, p);
         touching
             .iter()
             .filter(|t| {
