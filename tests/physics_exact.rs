@@ -259,6 +259,102 @@ fn cradle_gives_the_simultaneous_answer(speculative_speed: f64) {
     );
 }
 
+/// A cube, its body diagonal along x so that its leading corner lies on the
+/// line of its centre, strikes a resting bar (half extents 0.05, 0.3, 0.05,
+/// mass 2) at d = 0.2 m off the bar's centre, frictionless, e = 0.5, no
+/// gravity. The impulse along x is j = (1 + e)·v / (1/m₁ + 1/m₂ + d²/I_zz)
+/// with I_zz = m₂(0.05² + 0.3²)/3: the cube leaves at v − j/m₁, the bar
+/// at j/m₂ turning at −d·j/I_zz, and the cube does not turn. To 1e-9 m/s
+/// and rad/s; momentum and angular momentum about the origin to 1e-12.
+#[test]
+fn a_bar_struck_off_its_centre_takes_the_closed_form_impulse() {
+    bar_struck_off_its_centre(0.0);
+}
+
+#[test]
+fn a_bar_struck_off_its_centre_stays_exact_with_the_speculative_dial_on() {
+    bar_struck_off_its_centre(1.0);
+}
+
+fn bar_struck_off_its_centre(speculative_speed: f64) {
+    let (v, e, d, m1, m2) = (1.0, 0.5, 0.2, 1.0, 2.0);
+    // The rotation taking (1, 1, 1)/√3 onto x: about (0, 1, −1)/√2 by acos(1/√3).
+    let half = (1.0_f64 / 3.0_f64.sqrt()).acos() / 2.0;
+    let (c, s) = (half.cos(), half.sin() / 2.0_f64.sqrt());
+    let mut w = dialled(
+        world(&format!(
+            r#"
+            [world]
+            gravity = [0.0, 0.0, 0.0]
+            dt = 0.01
+            duration = 0.5
+            [objects.cube]
+            shape = {{ box = {{ half_extents = [0.05, 0.05, 0.05] }} }}
+            mass = {m1}
+            restitution = {e}
+            friction = 0.0
+            [objects.bar]
+            shape = {{ box = {{ half_extents = [0.05, 0.3, 0.05] }} }}
+            mass = {m2}
+            restitution = {e}
+            friction = 0.0
+            [[bodies]]
+            object = "cube"
+            position = [-0.5, {d}, 0.0]
+            orientation = [{c:.17}, 0.0, {s:.17}, {:.17}]
+            velocity = [{v}, 0.0, 0.0]
+            [[bodies]]
+            object = "bar"
+            "#,
+            -s
+        )),
+        speculative_speed,
+    );
+    let momentum = |w: &rigidsim::step::World| -> (Vector3<f64>, Vector3<f64>) {
+        let p = w
+            .bodies
+            .iter()
+            .enumerate()
+            .map(|(i, b)| b.state.velocity * w.object(i).mass);
+        let l = w.bodies.iter().enumerate().map(|(i, b)| {
+            let m = w.object(i).mass;
+            b.state.angular_momentum + b.state.position.cross(&(b.state.velocity * m))
+        });
+        (p.sum(), l.sum())
+    };
+    let (p0, l0) = momentum(&w);
+    run_until(&mut w, &mut Inline::default(), 0.5);
+    let i_zz = m2 * (0.05_f64.powi(2) + 0.3_f64.powi(2)) / 3.0;
+    let j = (1.0 + e) * v / (1.0 / m1 + 1.0 / m2 + d * d / i_zz);
+    let (cube, bar) = (&w.bodies[0], &w.bodies[1]);
+    let (w_cube, w_bar) = (
+        cube.angular_velocity(w.object(0)),
+        bar.angular_velocity(w.object(1)),
+    );
+    let seen = format!(
+        "cube {:?} {w_cube:?}, bar {:?} {w_bar:?}",
+        cube.state.velocity, bar.state.velocity
+    );
+    assert!(
+        (cube.state.velocity - Vector3::new(v - j / m1, 0.0, 0.0)).norm() < 1e-9,
+        "{seen}"
+    );
+    assert!(
+        (bar.state.velocity - Vector3::new(j / m2, 0.0, 0.0)).norm() < 1e-9,
+        "{seen}"
+    );
+    assert!(
+        (w_bar - Vector3::new(0.0, 0.0, -d * j / i_zz)).norm() < 1e-9,
+        "{seen}"
+    );
+    assert!(w_cube.norm() < 1e-9, "{seen}");
+    let (p1, l1) = momentum(&w);
+    assert!(
+        (p1 - p0).norm() <= 1e-12 && (l1 - l0).norm() <= 1e-12,
+        "p {p1:?}, L {l1:?}"
+    );
+}
+
 #[test]
 fn resting_cube_neither_drifts_nor_sinks_and_carries_its_weight() {
     let mut w = world(&format!(
