@@ -5,5 +5,6 @@
 pub mod broadphase;
 pub mod manifold;
 pub mod narrowphase;
+pub mod patch;
 pub mod polyhedron;
 pub mod vclip;

@@ -6,9 +6,9 @@
 //! thesis's hash table of feature pairs stays valid wherever a pair is sent.
 
 use super::manifold::{self, ContactPoint};
+use super::patch::reduce_to_patches;
 use super::vclip::{self, FeaturePair, Proximity};
 use crate::body::{BodyId, ObjectDef};
-use crate::math;
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -25,53 +25,6 @@ pub const CONTACT_TOLERANCE: f64 = 1e-5;
 /// contact may lie up to the tolerance past the pair's closest point, which
 /// is itself within the tolerance.
 pub const NEAR_FROM: f64 = 2.0 * CONTACT_TOLERANCE;
-
-/// Contact points kept per part pair. A flat 40-sided cap on a floor gives 40
-/// points, but 8 well-spread ones carry the same support polygon, and the
-/// LCP's cost grows with the cube of its rows.
-pub const MAX_POINTS_PER_PART_PAIR: usize = 8;
-
-/// Keeps at most `max` points: the deepest, then the extreme point of the
-/// patch in each of `max − 1` directions spread around the contact plane, so
-/// the support polygon (what keeps a body from tipping) is preserved.
-pub fn reduce_contacts(points: Vec<ContactPoint>, max: usize) -> Vec<ContactPoint> {
-    if points.len() <= max || max == 0 {
-        return points;
-    }
-    let n = points[0].normal;
-    let helper = if n.x.abs() < 0.6 {
-        nalgebra::Vector3::x()
-    } else {
-        nalgebra::Vector3::y()
-    };
-    let u = (helper - n * n.dot(&helper)).normalize();
-    let v = n.cross(&u);
-    let deepest = (0..points.len())
-        .min_by(|&i, &j| {
-            points[i]
-                .separation
-                .total_cmp(&points[j].separation)
-                .then(i.cmp(&j))
-        })
-        .unwrap_or(0);
-    let mut keep = vec![deepest];
-    for k in 0..max - 1 {
-        let angle = std::f64::consts::TAU * k as f64 / (max - 1) as f64;
-        let dir = u * math::cos(angle) + v * math::sin(angle);
-        let best = (0..points.len())
-            .max_by(|&i, &j| {
-                dir.dot(&points[i].point)
-                    .total_cmp(&dir.dot(&points[j].point))
-                    .then(j.cmp(&i))
-            })
-            .unwrap_or(0);
-        if !keep.contains(&best) {
-            keep.push(best);
-        }
-    }
-    keep.sort_unstable();
-    keep.into_iter().map(|i| points[i]).collect()
-}
 
 /// Closest features of one part pair, cached between frames.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -143,39 +96,9 @@ pub fn query_pair(objects: &[ObjectDef], task: &PairTask) -> PairResult {
         let prox = part_proximity(oa, ob, task, &warm, (ia, ib));
         add_part_pair(&mut out, oa, ob, task, ia, ib, &prox);
     }
-    out.contacts = reduce_per_normal(std::mem::take(&mut out.contacts));
-    out.near = reduce_per_normal(std::mem::take(&mut out.near));
+    out.contacts = reduce_to_patches(std::mem::take(&mut out.contacts));
+    out.near = reduce_to_patches(std::mem::take(&mut out.near));
     out
-}
-
-/// Contact normals closer than this (1 − cos of about 45 µrad) count as one
-/// contact plane when a body pair's points are reduced.
-const SAME_NORMAL: f64 = 1e-9;
-
-/// Reduces a body pair's points plane by plane to `MAX_POINTS_PER_PART_PAIR`
-/// each. A concave body's parts often touch in one plane (a nut lying flat
-/// on the floor: 32 wedges, up to 256 points, one support polygon); the LCP's
-/// cost grows with the cube of its rows, and the extreme points of the whole
-/// patch carry the same support polygon. Planes keep the order in which they
-/// first appear, so the result does not depend on anything but the query.
-fn reduce_per_normal(points: Vec<ContactPoint>) -> Vec<ContactPoint> {
-    if points.len() <= MAX_POINTS_PER_PART_PAIR {
-        return points;
-    }
-    let mut planes: Vec<Vec<ContactPoint>> = Vec::new();
-    for p in points {
-        match planes
-            .iter_mut()
-            .find(|g| g[0].normal.dot(&p.normal) >= 1.0 - SAME_NORMAL)
-        {
-            Some(g) => g.push(p),
-            None => planes.push(vec![p]),
-        }
-    }
-    planes
-        .into_iter()
-        .flat_map(|g| reduce_contacts(g, MAX_POINTS_PER_PART_PAIR))
-        .collect()
 }
 
 /// `min_A(n·x) − max_B(n·x)` over every part of both bodies, world
@@ -457,12 +380,11 @@ fn add_part_pair(
     } else {
         (points, Vec::new())
     };
-    for p in reduce_contacts(contacts, MAX_POINTS_PER_PART_PAIR) {
+    for p in reduce_to_patches(contacts) {
         out.depth = out.depth.max(-p.separation);
         out.contacts.push(p);
     }
-    out.near
-        .extend(reduce_contacts(near_points, MAX_POINTS_PER_PART_PAIR));
+    out.near.extend(reduce_to_patches(near_points));
 }
 
 /// A part pair's points found within the near distance, split into its

@@ -51,7 +51,10 @@ pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// `largest_rows`, `large_systems`). 10: the solver's worst violation
 /// (`SolveStats::worst_violation`). 11: the interior-point solves
 /// (`SolveStats::interior_solves`, `interior_steps`, `interior_missed`).
-pub const FORMAT: u32 = 12;
+/// 12: the contact model's dial. 13: contact patches (a pair's points are
+/// its patches' hull vertices, so a run resumed by an older build would
+/// differ) and `Counters::points_per_pair`.
+pub const FORMAT: u32 = 13;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";

@@ -229,6 +229,9 @@ impl Region<'_> {
                     Vec::new()
                 };
                 let reach = WARM_MATCH * oa.outer_radius();
+                if !t.points.is_empty() {
+                    self.counters.count_pair_points(t.points.len());
+                }
                 for (k, p) in points[ci].iter().enumerate() {
                     let near = k >= t.points.len();
                     let local = frame_a.transform_point(&p.point.into()).coords;

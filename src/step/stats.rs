@@ -60,6 +60,9 @@ pub struct Counters {
     pub overlaps_accepted: u64,
     pub islands: u64,
     pub contacts: u64,
+    /// Touching body pairs solved, by the contact points (normal rows) each
+    /// carried: 1, 2, 3, 4, 5–8, 9–16, 17–32, more.
+    pub points_per_pair: [u64; 8],
     pub solve: SolveStats,
     pub bodies_fallen: u64,
     pub wakes: u64,
@@ -73,6 +76,18 @@ pub struct Counters {
 }
 
 impl Counters {
+    /// Counts one touching pair's `points` in `points_per_pair`.
+    pub(crate) fn count_pair_points(&mut self, points: usize) {
+        let bucket = match points {
+            0..=4 => points.max(1) - 1,
+            5..=8 => 4,
+            9..=16 => 5,
+            17..=32 => 6,
+            _ => 7,
+        };
+        self.points_per_pair[bucket] += 1;
+    }
+
     /// Adds what one group step counted (`steps` and the per-step maxima
     /// are the caller's).
     pub(crate) fn add(&mut self, o: &Counters) {
@@ -97,6 +112,9 @@ impl Counters {
         self.overlaps_accepted += o.overlaps_accepted;
         self.islands += o.islands;
         self.contacts += o.contacts;
+        for (x, y) in self.points_per_pair.iter_mut().zip(o.points_per_pair) {
+            *x += y;
+        }
         self.solve.add(&o.solve);
         self.bodies_fallen += o.bodies_fallen;
         self.wakes += o.wakes;
