@@ -3,7 +3,8 @@
 # as scripts/stress.sh's `crowd` scenes) poured onto the 2 m floor, one rank,
 # --no-render: 50 bodies (±0.3 m, top 0.6 m) and 200 (±0.35 m, top 1.0 m)
 # to rest, 1000 (±0.55 m, top 1.6 m) for its first 1.5 s, beside 200 for
-# the same 1.5 s (the growth ratio outside solve_islands). Each count runs
+# the same 1.5 s (the growth ratio outside solve_islands), and the pile of
+# scenes/bin_of_parts.toml (300 bodies in a bin) to rest. Each count runs
 # with this checkout's build and with the build of BASE (a commit, default
 # be7269b, the last commit before interaction groups), interleaved, in one
 # sitting, so the ratios hold on a shared machine. bench/tools turns the
@@ -17,6 +18,7 @@
 #        crowd1000 itself): how long its solves take depends on the piles
 #        its trajectory builds, so reps of one scene would only repeat one
 #        draw (seed 1's first 1.5 s took 38 s, seed 3's 94 s at 52b0fe3).
+#        BIN=0 leaves the bin out (the tiny run always does).
 #        KEEP_RUNS=1 keeps every run's folder.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,7 +29,7 @@ tiny=${TINY:-0}
 machine=${BENCH_MACHINE:-$(hostname)-$(nproc)cpu}
 if [ "$tiny" = 1 ]; then
   out=${OUT:-target/bench-tiny/$machine}
-  BASE=${BASE:-none}; COUNTS="5 20"; REPS=1; REPS_BIG=1; extra=(--duration 0.2)
+  BASE=${BASE:-none}; COUNTS="5 20"; REPS=1; REPS_BIG=1; extra=(--duration 0.2); BIN=0
 else
   out=${OUT:-bench/results/$machine}
   BASE=${BASE:-be7269b}; COUNTS=${COUNTS:-"50 200 1000"}
@@ -72,6 +74,15 @@ for count in $COUNTS; do
     done
   done
 done
+if [ "${BIN:-1}" = 1 ]; then
+  for label in "${labels[@]}"; do
+    dir=$tmp/bin-$label
+    echo "bench_pour: the bin, $label"
+    "${bin[$label]}" scenes/bin_of_parts.toml --no-render --no-progress \
+      --sample-every 0.5 --out "$dir" >/dev/null 2>&1 || echo "bench_pour: run failed (bin, $label)"
+    echo "bin,300,1,$label,1,$dir" >>"$manifest"
+  done
+fi
 "${CARGO_TARGET_DIR:-target}"/release/rigidsim-bench-report "$manifest" "$tmp/report" 2>/dev/null
 cp "$tmp/report"/pours.* "$out"/
 echo "bench_pour: results in $out/pours.md (commits ${labels[*]})"

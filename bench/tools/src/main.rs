@@ -7,7 +7,8 @@
 //! frames: the thesis's set-up), `rt60` (dt = frame = 1/60 s) or `hetero`
 //! (variant `even` / `slow`, with or without `_force`), or `pour` (the
 //! nuts-and-bolts pours of `scripts/bench_pour.sh`, variant = the commit), or
-//! `network` (`scripts/bench_network.sh`: ranks = PCs of a lab, variant =
+//! `bin` (the pile of `scenes/bin_of_parts.toml` in `scripts/bench_pour.sh`,
+//! variant = the commit), or `network` (`scripts/bench_network.sh`: ranks = PCs of a lab, variant =
 //! the link, `1pc` for one rank without a lab), or `many_ranks`
 //! (`scripts/bench_many_ranks.sh`: the pours on 1 … 16 ranks, variant = the
 //! scene's name).
@@ -893,6 +894,7 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
         }
         md.push('\n');
     }
+    bin_table(runs, md);
     std::fs::write(out.join("pours.csv"), csv).expect("write pours.csv");
     let series_of = |pick: &dyn Fn(&PourPoint) -> f64| -> Vec<plot::Series> {
         variants
@@ -944,6 +946,49 @@ fn pours(runs: &[Run], out: &Path, md: &mut String) {
             .unwrap_or_default(),
     )
     .expect("write pours.md");
+}
+
+/// The pile in a bin (series `bin`), per commit: medians of the run's pace,
+/// its error (deepest overlap, the LCP's worst violation, bodies that left
+/// the bin) and how far the cluster could share it.
+fn bin_table(runs: &[Run], md: &mut String) {
+    let bin: Vec<&Run> = runs.iter().filter(|r| r.series == "bin").collect();
+    let mut variants: Vec<&str> = bin.iter().map(|r| r.variant.as_str()).collect();
+    variants.sort();
+    variants.dedup();
+    if variants.is_empty() {
+        return;
+    }
+    md.push_str("The pile: `scenes/bin_of_parts.toml` (300 nuts and bolts dropped into a closed bin), one rank, `--no-render`:\n\n| commit | runs | simulated [s] | ended | wall per simulated s | worst 0.1 s frame [s] | impact events | solve_islands share | largest LCP rows | LCP worst violation [m/s] | deepest overlap [µm] | bodies fallen | largest group share | group speed-up bound, 16 ranks |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for v in variants {
+        let rs: Vec<&Run> = bin.iter().copied().filter(|r| r.variant == v).collect();
+        let med = |g: &dyn Fn(&Run) -> f64| median(&rs.iter().map(|r| g(r)).collect::<Vec<_>>());
+        let at = |path: &[&str]| med(&|r| f(&r.s, path));
+        let bound16 = med(&|r| {
+            r.s["distributed"]["group_speedup_bound"]
+                .as_array()
+                .and_then(|a| a.iter().find(|x| x["ranks"] == 16))
+                .and_then(|x| x["speedup"].as_f64())
+                .unwrap_or(f64::NAN)
+        });
+        let ended = rs[0].s["end_reason"].as_str().unwrap_or("");
+        let _ = writeln!(
+            md,
+            "| {v} | {} | {:.2} | {ended} | {:.2} | {:.3} | {:.0} | {:.0} % | {:.0} | {:.1e} | {:.2} | {:.0} | {:.2} | {bound16:.2} |",
+            rs.len(),
+            at(&["sim_time_s"]),
+            med(&|r| f(&r.s, &["wall_time_s"]) / f(&r.s, &["sim_time_s"])),
+            at(&["worst_frame_s"]),
+            at(&["counters", "toi_events"]),
+            100.0 * med(&|r| f(&r.s, &["stage_seconds", "solve_islands"]) / f(&r.s, &["wall_time_s"])),
+            at(&["counters", "solve", "largest_rows"]),
+            at(&["counters", "solve", "worst_violation"]),
+            1e6 * at(&["max_penetration_m"]),
+            at(&["bodies_fallen"]),
+            at(&["distributed", "largest_group_share"]),
+        );
+    }
+    md.push('\n');
 }
 
 /// The 200-body pour on 1 rank and on every core (series `cores_pour`):
