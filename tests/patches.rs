@@ -26,9 +26,13 @@ fn read(path: &Path) -> IslandTask {
         .0
 }
 
-/// The island with each body pair's contacts reduced to its patches, as
-/// the narrowphase reduces them.
-fn reduced(task: &IslandTask) -> IslandTask {
+/// The island's contacts in patches: each body pair's patches (in the
+/// order of their first contacts), each patch's contacts in the order they
+/// came, and of each patch only its hull's vertices and deepest point where
+/// `reduce` says so. The narrowphase gives a pair's points patch by patch,
+/// and the solver takes a patch's consecutive contacts as one; the full
+/// island is put in that order too, which changes nothing else.
+fn in_patches(task: &IslandTask, reduce: bool) -> IslandTask {
     let mut pairs: BTreeMap<(u32, u32, bool), Vec<usize>> = BTreeMap::new();
     for (k, c) in task.contacts.iter().enumerate() {
         pairs.entry((c.a, c.b, c.near)).or_default().push(k);
@@ -38,13 +42,16 @@ fn reduced(task: &IslandTask) -> IslandTask {
         let normals: Vec<Vector3<f64>> = members.iter().map(|&k| task.contacts[k].normal).collect();
         for group in patch::patches(&normals) {
             let at: Vec<usize> = group.iter().map(|&g| members[g]).collect();
+            if !reduce {
+                keep.extend(at);
+                continue;
+            }
             let points: Vec<Vector3<f64>> = at.iter().map(|&k| task.contacts[k].point).collect();
             let gaps: Vec<f64> = at.iter().map(|&k| task.contacts[k].separation).collect();
             let normal = task.contacts[at[0]].normal;
             keep.extend(patch::kept_points(&points, &normal, &gaps).map(|i| at[i]));
         }
     }
-    keep.sort_unstable();
     IslandTask {
         contacts: keep.into_iter().map(|k| task.contacts[k].clone()).collect(),
         ..task.clone()
@@ -75,11 +82,12 @@ fn largest_difference(task: &IslandTask, x: &IslandResult, y: &IslandResult) -> 
 /// One island checked: (rows before, rows after, difference), or None
 /// where the full solve is no reference.
 fn check(task: &IslandTask) -> Option<(usize, usize, f64)> {
+    let task = &in_patches(task, false);
     let full = solve_island(task);
     if full.stats.failed > 0 || full.stats.worst_violation > REFERENCE_VIOLATION {
         return None;
     }
-    let small = reduced(task);
+    let small = in_patches(task, true);
     let answer = solve_island(&small);
     let difference = largest_difference(task, &full, &answer);
     Some((task.contacts.len(), small.contacts.len(), difference))

@@ -8,8 +8,8 @@
 //! patch can press with, and its support polygon, exactly; the deepest point
 //! is kept too, so the overlap the contact solve mends is the one measured.
 //!
-//! Friction, one pair of rows per kept point along the patch's shared
-//! tangents, keeps the patch's total friction bound (μ times its total
+//! Friction, one pair of rows per kept point along that point's own slip
+//! direction, keeps the patch's total friction bound (μ times its total
 //! normal force), but not where inside the patch that friction acts: a patch
 //! spinning about its normal meets the torsional friction of its hull's
 //! vertices, which lie farther out than the points dropped.
@@ -27,10 +27,11 @@ pub const SAME_NORMAL: f64 = 1e-9;
 const COLLINEAR_REL: f64 = 1e-12;
 
 /// The points of one body pair reduced to the hull vertices and the deepest
-/// point of each patch, in the order they came (patches in the order their
-/// first point came), so the result depends on the points alone.
+/// point of each patch, patch by patch (in the order of their first
+/// points), each patch's in the order they came: the result depends on the
+/// points alone, and a patch's points are consecutive.
 pub fn reduce_to_patches(points: Vec<ContactPoint>) -> Vec<ContactPoint> {
-    if points.len() <= 3 {
+    if points.len() <= 2 {
         return points;
     }
     let normals: Vec<Vector3<f64>> = points.iter().map(|p| p.normal).collect();
@@ -40,7 +41,6 @@ pub fn reduce_to_patches(points: Vec<ContactPoint>) -> Vec<ContactPoint> {
         let depth: Vec<f64> = patch.iter().map(|&i| points[i].separation).collect();
         keep.extend(kept_points(&at, &normals[patch[0]], &depth).map(|k| patch[k]));
     }
-    keep.sort_unstable();
     keep.into_iter().map(|i| points[i]).collect()
 }
 

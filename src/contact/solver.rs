@@ -32,6 +32,7 @@ use super::{lcp, subspace};
 use crate::body::BodyId;
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
+use crate::collision::patch::SAME_NORMAL;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -687,6 +688,43 @@ fn bounce_basis(c: &IslandContact, vn: f64, task: &IslandTask) -> f64 {
     }
 }
 
+/// Per contact, whether Newton's law applies at its impact: where any
+/// touching point of its contact patch approaches faster than the
+/// restitution threshold, every touching point of the patch restitutes from
+/// its own approach. A patch is one contact: one rule over it keeps its rows
+/// affine in the point, so the hull of its points (`collision::patch`)
+/// answers as all of them do. A patch: consecutive contacts of one pair
+/// whose normals agree to `patch::SAME_NORMAL`, as the narrowphase gives
+/// them.
+fn patches_that_bounce(task: &IslandTask, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> Vec<bool> {
+    let fast: Vec<bool> = task
+        .contacts
+        .iter()
+        .map(|c| {
+            let normal = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
+            let basis = bounce_basis(c, normal.velocity(v, w), task);
+            closing_allowed(c, task.dt) == 0.0 && basis < -task.restitution_threshold
+        })
+        .collect();
+    let mut bounces = vec![false; fast.len()];
+    let mut start = 0;
+    while start < fast.len() {
+        let first = &task.contacts[start];
+        let end = (start + 1..fast.len())
+            .find(|&k| {
+                let c = &task.contacts[k];
+                (c.a, c.b) != (first.a, first.b) || c.normal.dot(&first.normal) < 1.0 - SAME_NORMAL
+            })
+            .unwrap_or(fast.len());
+        let any = fast[start..end].iter().any(|&f| f);
+        for k in start..end {
+            bounces[k] = any && closing_allowed(&task.contacts[k], task.dt) == 0.0;
+        }
+        start = end;
+    }
+    bounces
+}
+
 /// Index of each contact's normal row in the row list `solve_phase` builds.
 fn normal_rows(task: &IslandTask) -> Vec<usize> {
     let mut at = 0;
@@ -784,6 +822,10 @@ fn solve_phase(
     // Each row's coefficient of restitution where the impact applies one.
     let mut restitution = Vec::with_capacity(most);
     let resting = matches!(phase, Phase::Resting { .. });
+    let bounces = match phase {
+        Phase::Impact => patches_that_bounce(task, v, w),
+        Phase::Resting { .. } => vec![false; task.contacts.len()],
+    };
     let mut deferred = 0.0;
     for (ci, c) in task.contacts.iter().enumerate() {
         let (a, b) = (c.a as usize, c.b as usize);
@@ -797,10 +839,8 @@ fn solve_phase(
             // slower than the speculative speed, `step::contact`).
             Phase::Impact if speculative > 0.0 => vn + speculative,
             // Newton's law from the approach, its own or the deferred one.
-            Phase::Impact if basis < vn && basis < -task.restitution_threshold => {
-                vn + c.restitution * basis
-            }
-            Phase::Impact if basis < -task.restitution_threshold => (1.0 + c.restitution) * vn,
+            Phase::Impact if basis < vn && bounces[ci] => vn + c.restitution * basis,
+            Phase::Impact if bounces[ci] => (1.0 + c.restitution) * vn,
             Phase::Impact => vn,
             // Over the step its gap changes by h (u + v')/2, u its speed
             // after the impact phase: it may end closed to the same gap.
@@ -840,7 +880,7 @@ fn solve_phase(
         }
         restitution.push(match phase {
             Phase::Impact if speculative > 0.0 => 0.0,
-            Phase::Impact if basis < -task.restitution_threshold => c.restitution,
+            Phase::Impact if bounces[ci] => c.restitution,
             _ => 0.0,
         });
         let ni = rows.len();
