@@ -2,8 +2,9 @@
 # The contact model's dial (`world.speculative_speed`, `--speculative-speed`)
 # on the pours of scripts/bench_pour.sh, one rank, --no-render: for each
 # setting, run time against error (deepest overlap, the LCP's worst
-# violation, energy at the end, when the pour came to rest) and what the
-# step did (impact events by approach speed, contact rows). One sitting,
+# violation, energy at the end, when the pour came to rest, the pushes of
+# speculative contacts and those that left their pair apart: ghosts) and
+# what the step did (impact events by approach speed, contact rows). One sitting,
 # settings interleaved per pour; a table on standard output and in
 # bench/results/<machine>/dial.md (BENCH_MACHINE, default <host>-<cores>cpu).
 #
@@ -48,8 +49,8 @@ cat >"$tmp/table.py" <<'PY'
 import json, sys
 print("| pour | dial (m/s) | simulated s | wall s | wall per simulated s | worst 0.1 s frame | ended "
       "| events (< g·dt/2, < 0.2, < 1, faster m/s) | contacts | LCP rows | deepest overlap (µm) "
-      "| worst LCP violation (m/s) | energy at end (J) |")
-print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+      "| worst LCP violation (m/s) | energy at end (J) | speculative pushes (ghosts) |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 for line in sys.stdin:
     count, dial, d = line.split()
     try:
@@ -64,7 +65,8 @@ for line in sys.stdin:
              f"{s['wall_time_s'] / max(s['sim_time_s'], 1e-9):.3f}", f"{s['worst_frame_s']:.3f}",
              s["end_reason"], f"{c['toi_events']} ({bands})", str(c["contacts"]), str(solve["rows"]),
              f"{s['max_penetration_m'] * 1e6:.2f}", f"{solve.get('worst_violation', 0.0):.1e}",
-             f"{s['energy_final_j']:.3f}"]
+             f"{s['energy_final_j']:.3f}",
+             f"{c.get('speculative_pushes', '—')} ({c.get('speculative_ghosts', '—')})"]
     print("| " + " | ".join(cells) + " |")
 PY
 printf '%s\n' "${rows[@]}" | python3 "$tmp/table.py" | tee "$out/dial.md"

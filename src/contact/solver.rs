@@ -158,6 +158,9 @@ pub struct IslandResult {
     /// that approach speed (negative), for the pair's next solve to bounce
     /// from (`IslandContact::approach`); else zero.
     pub carried: Vec<f64>,
+    /// Per contact in task order: whether it pushed, in the impact or the
+    /// resting solve.
+    pub pushed: Vec<bool>,
     pub stats: SolveStats,
 }
 
@@ -439,7 +442,9 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
     let force = std::mem::take(&mut r.contact_force);
     let friction = std::mem::take(&mut r.contact_friction);
     let carried = std::mem::take(&mut r.carried);
+    let pushed = std::mem::take(&mut r.pushed);
     for &(k, first) in &merged.into {
+        r.pushed.push(pushed[k]);
         r.contact_force.push(if first { force[k] } else { 0.0 });
         r.contact_friction
             .push(if first { friction[k] } else { Vector3::zeros() });
@@ -656,6 +661,7 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
             }
         })
         .collect();
+    out.pushed = pushed;
     out
 }
 

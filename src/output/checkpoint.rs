@@ -53,7 +53,8 @@ pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// (`SolveStats::interior_solves`, `interior_steps`, `interior_missed`).
 /// 12: the contact model's dial. 13: contact patches (a pair's points are
 /// its patches' hull vertices, so a run resumed by an older build would
-/// differ) and `Counters::points_per_pair`.
+/// differ), `Counters::points_per_pair`, `speculative_pushes` and
+/// `speculative_ghosts`.
 pub const FORMAT: u32 = 13;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.

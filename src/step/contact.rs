@@ -204,6 +204,8 @@ impl Region<'_> {
         let mut tasks = Vec::with_capacity(islands.len());
         // Per island, each contact's pair and point in A's body frame.
         let mut contact_pairs: Vec<Vec<ContactWhere>> = Vec::with_capacity(islands.len());
+        // Per island, which of its contacts are speculative.
+        let mut near_flags: Vec<Vec<bool>> = Vec::with_capacity(islands.len());
         // Per island, its bodies' local indices (tasks carry world ids).
         let mut locals: Vec<Vec<BodyId>> = Vec::with_capacity(islands.len());
         for (bodies, contact_ids) in &islands {
@@ -309,6 +311,7 @@ impl Region<'_> {
                 })
                 .collect();
             self.counters.contacts += contacts.len() as u64;
+            near_flags.push(contacts.iter().map(|c| c.near).collect());
             contact_pairs.push(pairs_here);
             locals.push(index);
             tasks.push(IslandTask {
@@ -330,10 +333,12 @@ impl Region<'_> {
             exec.solve_islands(tasks)
         };
         let mut pair_forces: BTreeMap<(BodyId, BodyId), f64> = Default::default();
-        for (pairs, r) in contact_pairs.iter().zip(&results) {
+        for ((pairs, near), r) in contact_pairs.iter().zip(&near_flags).zip(&results) {
             for (pair, _) in pairs {
                 self.warm.remove(pair);
             }
+            let pushed = (0..near.len()).filter(|&k| near[k] && r.pushed.get(k) == Some(&true));
+            self.speculative_pushes.extend(pushed.map(|k| pairs[k].0));
             for ((((pair, local), f), friction), approach) in pairs
                 .iter()
                 .zip(&r.contact_force)

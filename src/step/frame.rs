@@ -81,6 +81,7 @@ pub(super) fn step_world(
     w.stage.time_of_impact += clock.elapsed().as_secs_f64() - merged.nested;
     // Commit the end states, the contacts touching now and the caches.
     *touching = commit(w, start.end, merged, max_penetration);
+    count_start_ghosts(w, touching);
     *steps += 1;
     w.counters.steps += 1;
     check_states(
@@ -121,6 +122,24 @@ fn segments(w: &Region) -> Vec<Segment> {
             }
         })
         .collect()
+}
+
+/// Counts the pairs the step-start solve's speculative contacts pushed on
+/// (`Counters::speculative_pushes`) and those of them that ended the step
+/// apart (`speculative_ghosts`); a group's own solves count theirs at the
+/// group's end (`impacts::step_group`).
+fn count_start_ghosts(w: &mut Region, touching: &[Touching]) {
+    let pushes = std::mem::take(&mut w.speculative_pushes);
+    if pushes.is_empty() {
+        return;
+    }
+    let touches: BTreeSet<(BodyId, BodyId)> = touching
+        .iter()
+        .filter(|t| t.touches())
+        .map(|t| (t.a, t.b))
+        .collect();
+    w.counters.speculative_pushes += pushes.len() as u64;
+    w.counters.speculative_ghosts += pushes.difference(&touches).count() as u64;
 }
 
 /// What the step's contact solve leaves for the rest of the step.

@@ -374,6 +374,7 @@ pub fn prepare_pairs(
         stage: StageSeconds::default(),
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
+        speculative_pushes: Default::default(),
         integrated: Default::default(),
         keep_answers: false,
     };
@@ -645,6 +646,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         stage: StageSeconds::default(),
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
+        speculative_pushes: Default::default(),
         integrated: Default::default(),
         keep_answers: keep_paths,
     };
@@ -982,6 +984,7 @@ fn paths_meet(
         stage: StageSeconds::default(),
         impacts: Vec::new(),
         pair_forces: BTreeMap::new(),
+        speculative_pushes: Default::default(),
         integrated: Default::default(),
         keep_answers: false,
     };

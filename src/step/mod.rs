@@ -354,6 +354,7 @@ impl World {
             stage: take(&mut self.stage),
             impacts: take(&mut self.impacts),
             pair_forces: BTreeMap::new(),
+            speculative_pushes: Default::default(),
             integrated: Default::default(),
             keep_answers: false,
         };

@@ -22,7 +22,7 @@ use crate::scene::{ForceWindow, Settings};
 use nalgebra::{Isometry3, Vector3};
 use rustc_hash::FxBuildHasher;
 use std::cell::RefCell;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::Instant;
 
 /// What every region of one step reads and nothing changes: the scene's
@@ -74,6 +74,10 @@ pub(crate) struct Region<'s> {
     pub impacts: Vec<Touching>,
     /// Total resting normal force on each pair in its latest solve.
     pub pair_forces: BTreeMap<(BodyId, BodyId), f64>,
+    /// Pairs a speculative contact pushed on in this step (it held a
+    /// resting force or deferred a bounce), checked at the step's end
+    /// (`Counters::speculative_ghosts`).
+    pub speculative_pushes: BTreeSet<(BodyId, BodyId)>,
     /// Integrations along segments already done (`integrate_segment`).
     pub integrated: Integrated,
     /// Whether its island answers, times of impact and pair tests are kept

@@ -58,6 +58,12 @@ pub struct Counters {
     pub max_events_in_step: u64,
     pub steps_with_events: u64,
     pub overlaps_accepted: u64,
+    /// Pairs a speculative contact pushed on in a step (it held a resting
+    /// force or deferred a bounce), counted once a step.
+    pub speculative_pushes: u64,
+    /// Those of them that ended the step apart by more than the contact
+    /// tolerance: a push with no touch, to be seen as a gap.
+    pub speculative_ghosts: u64,
     pub islands: u64,
     pub contacts: u64,
     /// Touching body pairs solved, by the contact points (normal rows) each
@@ -110,6 +116,8 @@ impl Counters {
         self.toi_missed_overlaps += o.toi_missed_overlaps;
         self.spin_resolves += o.spin_resolves;
         self.overlaps_accepted += o.overlaps_accepted;
+        self.speculative_pushes += o.speculative_pushes;
+        self.speculative_ghosts += o.speculative_ghosts;
         self.islands += o.islands;
         self.contacts += o.contacts;
         for (x, y) in self.points_per_pair.iter_mut().zip(o.points_per_pair) {
