@@ -44,15 +44,17 @@ pub fn reduce_to_patches(points: Vec<ContactPoint>) -> Vec<ContactPoint> {
     keep.into_iter().map(|i| points[i]).collect()
 }
 
+/// Whether two unit contact normals share a patch (`SAME_NORMAL`).
+pub fn same_normal(n: &Vector3<f64>, m: &Vector3<f64>) -> bool {
+    n.dot(m) >= 1.0 - SAME_NORMAL
+}
+
 /// Indices of the points grouped by shared normal, each group in the order
 /// its points came, groups in the order of their first point.
 pub fn patches(normals: &[Vector3<f64>]) -> Vec<Vec<usize>> {
     let mut groups: Vec<Vec<usize>> = Vec::new();
     for (i, n) in normals.iter().enumerate() {
-        match groups
-            .iter_mut()
-            .find(|g| normals[g[0]].dot(n) >= 1.0 - SAME_NORMAL)
-        {
+        match groups.iter_mut().find(|g| same_normal(&normals[g[0]], n)) {
             Some(g) => g.push(i),
             None => groups.push(vec![i]),
         }

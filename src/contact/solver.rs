@@ -32,7 +32,7 @@ use super::{lcp, subspace};
 use crate::body::BodyId;
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
-use crate::collision::patch::SAME_NORMAL;
+use crate::collision::patch::same_normal;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -700,16 +700,16 @@ fn bounce_basis(c: &IslandContact, vn: f64, task: &IslandTask) -> f64 {
 /// its own approach. A patch is one contact: one rule over it keeps its rows
 /// affine in the point, so the hull of its points (`collision::patch`)
 /// answers as all of them do. A patch: consecutive contacts of one pair
-/// whose normals agree to `patch::SAME_NORMAL`, as the narrowphase gives
-/// them.
-fn patches_that_bounce(task: &IslandTask, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> Vec<bool> {
+/// whose normals agree (`patch::same_normal`), as the narrowphase gives
+/// them. `speeds` are the contacts' normal speeds.
+fn patches_that_bounce(task: &IslandTask, speeds: &[f64]) -> Vec<bool> {
     let fast: Vec<bool> = task
         .contacts
         .iter()
-        .map(|c| {
-            let normal = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal);
-            let basis = bounce_basis(c, normal.velocity(v, w), task);
-            closing_allowed(c, task.dt) == 0.0 && basis < -task.restitution_threshold
+        .zip(speeds)
+        .map(|(c, &vn)| {
+            closing_allowed(c, task.dt) == 0.0
+                && bounce_basis(c, vn, task) < -task.restitution_threshold
         })
         .collect();
     let mut bounces = vec![false; fast.len()];
@@ -719,7 +719,7 @@ fn patches_that_bounce(task: &IslandTask, v: &[Vector3<f64>], w: &[Vector3<f64>]
         let end = (start + 1..fast.len())
             .find(|&k| {
                 let c = &task.contacts[k];
-                (c.a, c.b) != (first.a, first.b) || c.normal.dot(&first.normal) < 1.0 - SAME_NORMAL
+                (c.a, c.b) != (first.a, first.b) || !same_normal(&c.normal, &first.normal)
             })
             .unwrap_or(fast.len());
         let any = fast[start..end].iter().any(|&f| f);
@@ -828,15 +828,20 @@ fn solve_phase(
     // Each row's coefficient of restitution where the impact applies one.
     let mut restitution = Vec::with_capacity(most);
     let resting = matches!(phase, Phase::Resting { .. });
+    let normals: Vec<Row> = task
+        .contacts
+        .iter()
+        .map(|c| Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal))
+        .collect();
+    let speeds: Vec<f64> = normals.iter().map(|row| row.velocity(v, w)).collect();
     let bounces = match phase {
-        Phase::Impact => patches_that_bounce(task, v, w),
+        Phase::Impact => patches_that_bounce(task, &speeds),
         Phase::Resting { .. } => vec![false; task.contacts.len()],
     };
     let mut deferred = 0.0;
-    for (ci, c) in task.contacts.iter().enumerate() {
+    for ((ci, c), normal) in task.contacts.iter().enumerate().zip(normals) {
         let (a, b) = (c.a as usize, c.b as usize);
-        let normal = Row::new(&task.bodies, a, b, &c.point, c.normal);
-        let vn = normal.velocity(v, w);
+        let vn = speeds[ci];
         let speculative = closing_allowed(c, task.dt);
         let basis = bounce_basis(c, vn, task);
         let b_n = match phase {

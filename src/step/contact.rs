@@ -400,6 +400,17 @@ impl Region<'_> {
     }
 }
 
+impl Region<'_> {
+    /// Counts the pairs speculative contacts pushed on since the last count
+    /// (`Counters::speculative_pushes`) and those of them that do not
+    /// `touch` now (`speculative_ghosts`), and forgets them.
+    pub(crate) fn count_speculative_ghosts(&mut self, touch: impl Fn(&(BodyId, BodyId)) -> bool) {
+        let pushes = std::mem::take(&mut self.speculative_pushes);
+        self.counters.speculative_pushes += pushes.len() as u64;
+        self.counters.speculative_ghosts += pushes.iter().filter(|p| !touch(p)).count() as u64;
+    }
+}
+
 /// The moving bodies of each contact island of the touching pairs, to tell
 /// an approach inside a pile from one that stands alone
 /// (`Settings::pile_bodies`).

@@ -124,13 +124,11 @@ fn segments(w: &Region) -> Vec<Segment> {
         .collect()
 }
 
-/// Counts the pairs the step-start solve's speculative contacts pushed on
-/// (`Counters::speculative_pushes`) and those of them that ended the step
-/// apart (`speculative_ghosts`); a group's own solves count theirs at the
-/// group's end (`impacts::step_group`).
+/// Counts the step-start solve's speculative pushes and ghosts against the
+/// contacts touching at the step's end; a group's own solves count theirs
+/// at the group's end (`impacts::step_group`).
 fn count_start_ghosts(w: &mut Region, touching: &[Touching]) {
-    let pushes = std::mem::take(&mut w.speculative_pushes);
-    if pushes.is_empty() {
+    if w.speculative_pushes.is_empty() {
         return;
     }
     let touches: BTreeSet<(BodyId, BodyId)> = touching
@@ -138,8 +136,7 @@ fn count_start_ghosts(w: &mut Region, touching: &[Touching]) {
         .filter(|t| t.touches())
         .map(|t| (t.a, t.b))
         .collect();
-    w.counters.speculative_pushes += pushes.len() as u64;
-    w.counters.speculative_ghosts += pushes.difference(&touches).count() as u64;
+    w.count_speculative_ghosts(|pair| touches.contains(pair));
 }
 
 /// What the step's contact solve leaves for the rest of the step.

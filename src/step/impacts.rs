@@ -505,16 +505,11 @@ pub(crate) fn step_group(
         }
     }
     g.counters.toi_events += events as u64;
-    g.counters.speculative_pushes += g.speculative_pushes.len() as u64;
-    g.counters.speculative_ghosts += g
-        .speculative_pushes
-        .iter()
-        .filter(|(a, b)| {
-            book.results
-                .get(&(a.0, b.0))
-                .is_none_or(|r| r.contacts.is_empty())
-        })
-        .count() as u64;
+    g.count_speculative_ghosts(|(a, b)| {
+        book.results
+            .get(&(a.0, b.0))
+            .is_some_and(|r| !r.contacts.is_empty())
+    });
     g.stage.time_of_impact += clock.elapsed().as_secs_f64() - (g.stage.nested() - nested_before);
     let (pairs, results) = book.results.into_iter().unzip();
     let paths = (0..paths.len())
