@@ -145,10 +145,16 @@ fn a_pour_ends_the_same_whatever_the_group_margin() {
         "nothing woke: {:?}",
         reference.counters
     );
+    // Every event is counted once by the bodies it rolled back, and a
+    // pour's events roll back more than one body.
+    let rollback = reference.counters.toi_events_by_rollback;
+    assert_eq!(rollback.iter().sum::<u64>(), reference.counters.toi_events);
+    assert!(rollback[1..].iter().sum::<u64>() > 0, "{rollback:?}");
     for margin in [0.02, rigidsim::step::GROUP_MARGIN, 1.0] {
         let w = run_with(margin);
         assert_eq!(w.state_hash(), reference.state_hash(), "margin {margin}");
         assert_eq!(w.counters.toi_events, reference.counters.toi_events);
+        assert_eq!(w.counters.toi_events_by_rollback, rollback);
         if margin == 1.0 {
             assert!(
                 w.counters.groups < reference.counters.groups,

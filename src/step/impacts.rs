@@ -435,6 +435,7 @@ pub(crate) fn step_group(
             }
             let speed = approach_speed(&g, pair, &group_states, &group_pairs, &at_tau, &seg);
             g.counters.toi_events_by_approach[approach_band(speed, g.st.settings)] += 1;
+            g.counters.count_event_rollback(group_states.len());
         }
         let rolled: Vec<usize> = group_states.iter().map(|&(i, _)| i).collect();
         // Roll the bodies back to τ; a path that had already left its

@@ -47,6 +47,11 @@ pub struct Counters {
     /// g·dt/2 (no bounce), up to 0.2 m/s, up to 1 m/s, faster. Where a
     /// pour's events come from, for the contact model's dial.
     pub toi_events_by_approach: [u64; 4],
+    /// Impact events by how many bodies they rolled back to their instant
+    /// and solved again: 1, 2, 3–7, 8–31, 32 or more. An event inside a
+    /// pile rolls back the pile (its contact island), and each costs the
+    /// pile's contact solve.
+    pub toi_events_by_rollback: [u64; 5],
     pub toi_bisection_queries: u64,
     /// Impacts found at another impact's instant, in a pair that had begun
     /// to overlap before it unseen (see `Region::earlier_impact`).
@@ -82,6 +87,18 @@ pub struct Counters {
 }
 
 impl Counters {
+    /// Counts one impact event that rolled back `bodies` bodies in
+    /// `toi_events_by_rollback`.
+    pub(crate) fn count_event_rollback(&mut self, bodies: usize) {
+        let bucket = match bodies {
+            0..=2 => bodies.max(1) - 1,
+            3..=7 => 2,
+            8..=31 => 3,
+            _ => 4,
+        };
+        self.toi_events_by_rollback[bucket] += 1;
+    }
+
     /// Counts one touching pair's `points` in `points_per_pair`.
     pub(crate) fn count_pair_points(&mut self, points: usize) {
         let bucket = match points {
@@ -109,6 +126,13 @@ impl Counters {
             .toi_events_by_approach
             .iter_mut()
             .zip(o.toi_events_by_approach)
+        {
+            *x += y;
+        }
+        for (x, y) in self
+            .toi_events_by_rollback
+            .iter_mut()
+            .zip(o.toi_events_by_rollback)
         {
             *x += y;
         }
