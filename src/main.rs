@@ -23,10 +23,8 @@ use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
 use rigidsim::output::checkpoint::Checkpoint;
 use rigidsim::output::summary::RankHost;
 use rigidsim::output::trajectory;
-use rigidsim::run::{
-    self, Driver, FrameRenderer, FrameSink, InlineFrames, NoFrames, RunError, RunOptions,
-    Unattended,
-};
+use rigidsim::render::{FrameRenderer, FrameSink, InlineFrames, NoFrames};
+use rigidsim::run::{self, Driver, RunError, RunOptions, Unattended};
 use rigidsim::step::{Executor, Inline};
 use std::path::PathBuf;
 use std::process::ExitCode;

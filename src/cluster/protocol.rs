@@ -7,7 +7,7 @@
 
 use crate::collision::narrowphase::{PairResult, PairTask};
 use crate::contact::solver::{IslandResult, IslandTask};
-use crate::run::Frame;
+use crate::render::Frame;
 use crate::scene::ForceWindow;
 use crate::step::{GroupInput, GroupParams, GroupReply, PreparedPairs};
 use serde::{Deserialize, Serialize};

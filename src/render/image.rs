@@ -33,7 +33,7 @@ impl Image {
 }
 
 /// Keyword of the tEXt chunk a frame's PNG carries its mark under (see
-/// `Frame::mark` in `run.rs`).
+/// `Frame::mark` in `frame.rs`).
 pub const FRAME_MARK_KEY: &str = "rigidsim-frame";
 
 pub fn write_png(path: impl AsRef<Path>, image: &Image) -> Result<(), RenderError> {

@@ -4,9 +4,11 @@
 //! draws it here: headless wgpu (no window, no surface), read back into an
 //! [`Image`], then written as PNG ([`write_png`]) or streamed to ffmpeg
 //! ([`VideoWriter`]); [`read_png`] reads a frame back for a resumed run's
-//! video. This module knows nothing of scenes or MPI: it takes
+//! video. The renderer knows nothing of scenes or MPI: it takes
 //! plain meshes, poses and colours, so the rank that owns it can be tested
-//! on its own.
+//! on its own. The frames rank 0 publishes ([`Frame`], [`FrameSink`]) and
+//! their drawing from a scene's bodies ([`FrameRenderer`]) are in `frame.rs`
+//! and `frame_renderer.rs`.
 //!
 //! Frame recipe, in the order [`Renderer::render`] runs it:
 //! 1. instances are grouped by mesh (counting sort) into one instance buffer;
@@ -25,6 +27,8 @@
 //! one more free box.
 
 mod camera;
+mod frame;
+mod frame_renderer;
 mod gpu;
 mod image;
 mod mesh;
@@ -33,6 +37,8 @@ mod video;
 use std::path::PathBuf;
 
 pub use camera::{Camera, look_at_scene};
+pub use frame::{Frame, FrameSink, NoFrames, Pose};
+pub use frame_renderer::{FrameRenderer, InlineFrames};
 pub use gpu::Renderer;
 pub use image::{FRAME_MARK_KEY, Image, read_png, read_png_marked, write_png, write_png_marked};
 pub use mesh::Mesh;
