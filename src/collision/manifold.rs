@@ -18,6 +18,7 @@ use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::polyhedron::ConvexPolyhedron;
+pub use super::vclip::{FACE_CONTACT_COS, FACE_CONTACT_SIN};
 use super::vclip::{Feature, Proximity, closest_segment_points, separating_axis};
 
 /// A face counts as facing the other body, and an edge as lying across the
@@ -26,12 +27,6 @@ use super::vclip::{Feature, Proximity, closest_segment_points, separating_axis};
 /// 100-sided prism (3.6° apart) stay distinct; points of a face that is
 /// tilted within it but gapes by more than `tolerance` are dropped anyway.
 pub const FACE_CONTACT_ANGLE: f64 = 0.01;
-/// The cosine and sine of `FACE_CONTACT_ANGLE` (`math::cos`, `math::sin`,
-/// to the bit: a test checks them). Written out because the `libm` crate's
-/// functions, unlike the C library's, are not folded at compile time: as
-/// calls they ran at every use, twice in each `Support::of`.
-pub const FACE_CONTACT_COS: f64 = 0.9999500004166653;
-pub const FACE_CONTACT_SIN: f64 = 0.009999833334166664;
 
 /// Points closer than this fraction of the smaller polyhedron's size are
 /// merged (clipping a polygon at its own corners repeats them).

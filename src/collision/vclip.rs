@@ -40,8 +40,14 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::manifold::FACE_CONTACT_COS;
 use super::polyhedron::{ConvexPolyhedron, VoronoiPlane};
+
+/// The cosine and sine of `FACE_CONTACT_ANGLE` (`math::cos`, `math::sin`,
+/// to the bit: a test checks them). Written out because the `libm` crate's
+/// functions, unlike the C library's, are not folded at compile time: as
+/// calls they ran at every use, twice in each `Support::of`.
+pub const FACE_CONTACT_COS: f64 = 0.9999500004166653;
+pub const FACE_CONTACT_SIN: f64 = 0.009999833334166664;
 
 /// A vertex, edge or face of one polyhedron, by index into its tables.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -16,7 +16,6 @@ use super::Settings;
 use crate::body::ObjectDef;
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use crate::collision::polyhedron::ConvexPolyhedron;
-use crate::step::MAX_SPEED;
 use nalgebra::Vector3;
 
 /// Largest |coordinate| of a body's placement, or of a scatter box, on each
@@ -42,6 +41,13 @@ pub const MAX_MASS: f64 = 1e12;
 /// about 10 µs, so 10⁹ steps are hours of wall time even for it, and years
 /// for a pile of bodies: a longer run is a typo, not a plan.
 pub const MAX_STEPS: u64 = 1_000_000_000;
+
+/// The speed no body may reach, m/s: a step that produces one stops the run
+/// (`check_states`), and a scene that starts with one is refused
+/// (`scene::load`). The fastest bodies the tests throw move at a thousandth
+/// of it (1000 m/s at a 1 cm wall); at 10⁶ m/s a 10 ms step carries a body
+/// 10 km.
+pub const MAX_SPEED: f64 = 1e6;
 
 /// Largest acceleration gravity or a force may give a body, m/s² (10⁸ g):
 /// even at it a body takes a millisecond to reach the speed bound, where

@@ -6,7 +6,6 @@
 //! wound and convex, and merges coplanar triangles into faces. With
 //! `hull = true` the convex hull of all vertices is taken instead.
 
-use super::shapes::NamedPart;
 use crate::collision::polyhedron::{self, ConvexPolyhedron};
 use nalgebra::Vector3;
 use std::path::Path;
@@ -15,6 +14,12 @@ use std::path::Path;
 pub const MAX_MESH_BYTES: u64 = 256 * 1024 * 1024;
 /// Welding tolerance relative to the mesh's bounding-box diagonal.
 const WELD_RELATIVE: f64 = 1e-9;
+
+/// A convex part with the name used in error messages ("shape.compound[1].box").
+pub struct NamedPart {
+    pub name: String,
+    pub hull: ConvexPolyhedron,
+}
 
 type RawPart = (String, Vec<Vector3<f64>>, Vec<Vec<usize>>);
 

@@ -2,6 +2,7 @@
 //! (the thesis's "ptree": a concave object is a union of convex parts).
 
 use super::mesh_files;
+pub use super::mesh_files::NamedPart;
 use super::schema::ShapeSpec;
 use crate::collision::polyhedron::ConvexPolyhedron;
 use crate::math;
@@ -12,12 +13,6 @@ use std::path::Path;
 /// Upper bounds that keep a hostile scene from asking for absurd work.
 pub const MAX_SIDES: u32 = 512;
 pub const MAX_SUBDIVISIONS: u32 = 5;
-
-/// A convex part with the name used in error messages ("shape.compound[1].box").
-pub struct NamedPart {
-    pub name: String,
-    pub hull: ConvexPolyhedron,
-}
 
 /// Builds the convex parts of a shape. `field` names the shape in errors;
 /// `base_dir` resolves mesh paths (the scene file's folder).

@@ -35,6 +35,7 @@ mod sleep;
 pub mod stats;
 mod toi;
 
+pub use crate::scene::bounds::MAX_SPEED;
 pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
 pub(crate) use contact::{Touching, WarmContact};
 pub use group::{
@@ -429,13 +430,6 @@ impl World {
         (self.bodies[body].pose() * Point3::from(local)).coords
     }
 }
-/// The speed no body may reach, m/s: a step that produces one stops the run
-/// (`check_states`), and a scene that starts with one is refused
-/// (`scene::load`). The fastest bodies the tests throw move at a thousandth
-/// of it (1000 m/s at a 1 cm wall); at 10⁶ m/s a 10 ms step carries a body
-/// 10 km.
-pub const MAX_SPEED: f64 = 1e6;
-
 /// Stops the run when a state is non-finite or faster than `MAX_SPEED`,
 /// naming the stage that produced it: `solve_islands` right after a
 /// contact solve (impulses), `integrate` at the end of the step (forces,
