@@ -23,8 +23,8 @@
 //! as the sweeps' would.
 
 use super::block_lu::{BlockLu, BlockMatrix, BlockPattern};
-use super::solver::{IterativeState, IterativeSystem, Row, Step};
 use super::subspace;
+use super::system::{IterativeState, IterativeSystem, Row, Step};
 use faer::Mat;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use nalgebra::Vector3;
@@ -634,7 +634,7 @@ fn finish(
         let Some(by_body) = &by_body else {
             break;
         };
-        match system.subspace_step(by_body, &mut state) {
+        match subspace::step(system, by_body, &mut state) {
             Step::Kept => {}
             _ => break,
         }

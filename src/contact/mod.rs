@@ -7,3 +7,4 @@ pub mod island;
 pub mod lcp;
 pub mod solver;
 mod subspace;
+mod system;

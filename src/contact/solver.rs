@@ -28,30 +28,17 @@
 //! direction the external forces push), so kinetic friction is exactly
 //! opposite the slip and isotropic; the second direction is perpendicular.
 
+pub use super::system::IslandBody;
+use super::system::{IterativeSystem, Row, RowFactorsOf, Step};
 use super::{lcp, subspace};
-use crate::body::BodyId;
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use crate::collision::patch::same_normal;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// Contacts approaching slower than this (m/s) need no impact solve.
 const APPROACH_EPS: f64 = 1e-9;
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct IslandBody {
-    pub id: BodyId,
-    pub inv_mass: f64,
-    /// World inverse inertia (zero for fixed and driven bodies).
-    pub inv_inertia: Matrix3<f64>,
-    pub position: Vector3<f64>,
-    pub velocity: Vector3<f64>,
-    pub angular_velocity: Vector3<f64>,
-    /// Velocity change the external forces give over the step (a·h, α·h).
-    pub external_dv: Vector3<f64>,
-    pub external_dw: Vector3<f64>,
-}
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct IslandContact {
@@ -256,164 +243,6 @@ impl SolveStats {
         self.interior_solves += o.interior_solves;
         self.interior_steps += o.interior_steps;
         self.interior_missed += o.interior_missed;
-    }
-}
-
-/// One LCP row: direction d at contact `contact`, with M⁻¹Jᵀ precomputed.
-pub(super) struct Row {
-    pub(super) a: usize,
-    pub(super) b: usize,
-    lin: Vector3<f64>,
-    ang_a: Vector3<f64>,
-    ang_b: Vector3<f64>,
-    /// M⁻¹Jᵀ: velocity change of A and B per unit impulse on this row.
-    dva: Vector3<f64>,
-    dwa: Vector3<f64>,
-    dvb: Vector3<f64>,
-    dwb: Vector3<f64>,
-}
-
-impl Row {
-    fn new(
-        bodies: &[IslandBody],
-        a: usize,
-        b: usize,
-        point: &Vector3<f64>,
-        d: Vector3<f64>,
-    ) -> Row {
-        let (ba, bb) = (&bodies[a], &bodies[b]);
-        let ang_a = (point - ba.position).cross(&d);
-        let ang_b = -(point - bb.position).cross(&d);
-        Row {
-            a,
-            b,
-            lin: d,
-            ang_a,
-            ang_b,
-            dva: d * ba.inv_mass,
-            dwa: ba.inv_inertia * ang_a,
-            dvb: -d * bb.inv_mass,
-            dwb: bb.inv_inertia * ang_b,
-        }
-    }
-
-    /// J on A and on B, linear then angular (for `lcp::RowFactors`).
-    pub(super) fn jacobian(&self) -> [[f64; 6]; 2] {
-        let side =
-            |lin: Vector3<f64>, ang: Vector3<f64>| [lin.x, lin.y, lin.z, ang.x, ang.y, ang.z];
-        [side(self.lin, self.ang_a), side(-self.lin, self.ang_b)]
-    }
-
-    /// M⁻¹Jᵀ on A and on B, linear then angular (for `lcp::RowFactors`).
-    pub(super) fn response(&self) -> [[f64; 6]; 2] {
-        let side = |dv: Vector3<f64>, dw: Vector3<f64>| [dv.x, dv.y, dv.z, dw.x, dw.y, dw.z];
-        [side(self.dva, self.dwa), side(self.dvb, self.dwb)]
-    }
-
-    /// Relative velocity along the row: J·v.
-    pub(super) fn velocity(&self, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> f64 {
-        self.lin.dot(&v[self.a]) + self.ang_a.dot(&w[self.a]) - self.lin.dot(&v[self.b])
-            + self.ang_b.dot(&w[self.b])
-    }
-
-    /// Adds the velocity change of an impulse `p` on this row to both bodies.
-    pub(super) fn change_velocities(&self, p: f64, v: &mut [Vector3<f64>], w: &mut [Vector3<f64>]) {
-        v[self.a] += self.dva * p;
-        w[self.a] += self.dwa * p;
-        v[self.b] += self.dvb * p;
-        w[self.b] += self.dwb * p;
-    }
-
-    /// Whether an impulse on this row moves A, and B (a fixed body takes
-    /// none).
-    pub(super) fn moves(&self) -> (bool, bool) {
-        let moves = |dv: &Vector3<f64>, dw: &Vector3<f64>| {
-            *dv != Vector3::zeros() || *dw != Vector3::zeros()
-        };
-        (moves(&self.dva, &self.dwa), moves(&self.dvb, &self.dwb))
-    }
-
-    /// This row's side on body `body` (A or B): J's linear and angular
-    /// parts there and the velocity change M⁻¹Jᵀ a unit impulse gives it,
-    /// the terms of `coupling` through that body.
-    pub(super) fn side(&self, body: usize) -> RowSide {
-        if body == self.a {
-            RowSide {
-                lin: self.lin,
-                ang: self.ang_a,
-                dv: self.dva,
-                dw: self.dwa,
-            }
-        } else {
-            RowSide {
-                lin: -self.lin,
-                ang: self.ang_b,
-                dv: self.dvb,
-                dw: self.dwb,
-            }
-        }
-    }
-
-    /// J_self · (M⁻¹ J_other ᵀ). The terms are `RowSide::coupling`'s,
-    /// written out: built from `side` they cost the 1000-body pile 2.5 %
-    /// more instructions (its dense systems ask this for every pair).
-    pub(super) fn coupling(&self, other: &Row) -> f64 {
-        let mut s = 0.0;
-        for (body, lin, ang) in [
-            (self.a, self.lin, self.ang_a),
-            (self.b, -self.lin, self.ang_b),
-        ] {
-            if body == other.a {
-                s += lin.dot(&other.dva) + ang.dot(&other.dwa);
-            }
-            if body == other.b {
-                s += lin.dot(&other.dvb) + ang.dot(&other.dwb);
-            }
-        }
-        s
-    }
-}
-
-/// A row on one of its bodies (`Row::side`).
-#[derive(Clone, Copy)]
-pub(super) struct RowSide {
-    pub(super) lin: Vector3<f64>,
-    pub(super) ang: Vector3<f64>,
-    pub(super) dv: Vector3<f64>,
-    pub(super) dw: Vector3<f64>,
-}
-
-impl RowSide {
-    /// The coupling of this side's row with `other`'s row through the
-    /// body they share: `Row::coupling`'s term for that body, to the bit.
-    pub(super) fn coupling(&self, other: &RowSide) -> f64 {
-        self.lin.dot(&other.dv) + self.ang.dot(&other.dw)
-    }
-}
-
-/// The storage behind `lcp::RowFactors` for a list of rows.
-struct RowFactorsOf {
-    body: Vec<[u32; 2]>,
-    jacobian: Vec<[[f64; 6]; 2]>,
-    response: Vec<[[f64; 6]; 2]>,
-}
-
-impl RowFactorsOf {
-    fn new(rows: &[Row]) -> Self {
-        RowFactorsOf {
-            body: rows.iter().map(|r| [r.a as u32, r.b as u32]).collect(),
-            jacobian: rows.iter().map(Row::jacobian).collect(),
-            response: rows.iter().map(Row::response).collect(),
-        }
-    }
-
-    fn view(&self, bodies: usize) -> lcp::RowFactors<'_> {
-        lcp::RowFactors {
-            bodies,
-            body: &self.body,
-            jacobian: &self.jacobian,
-            response: &self.response,
-        }
     }
 }
 
@@ -1595,33 +1424,6 @@ const SWEEPS_BEFORE_LARGE_INTERIOR: usize = 16;
 /// stands to the last bit (10 000 s).
 const WARM_CLOSE: f64 = 1e-4;
 const ITERATIVE_CHECK_EVERY: usize = 8;
-/// How far an iterative answer may miss the LCP's conditions: each row's
-/// velocity w = (A + c·diag) p + b within the larger of this share of the
-/// largest |b| of the system and `ITERATIVE_FLOOR`, on the side its bound
-/// does not allow (w ≥ 0 at a lower bound, w ≤ 0 at an upper one, w = 0
-/// between). Once the pushing set is right the subspace step is exact, so
-/// the tolerance can be tight: at 1e-6 of |b| (1e-7 m/s at rest) the
-/// pyramid solved iteratively gained 2.9e-6 J in 3 s, its cubes drifting up
-/// by up to 1 nm a step; at the floor it gains none.
-const ITERATIVE_RESIDUAL: f64 = 1e-9;
-/// The least tolerance (m/s): 0.1 nm of approach over a 10 ms step. It
-/// decides for every system slower than 10 m/s. An impact solve of
-/// rounding-size approaches (|b| ≈ 1e-8 m/s) would otherwise ask for
-/// 1e-14 m/s; there most contacts neither push nor move apart, the pushing
-/// set flips between checks, and the solve spent all its sweeps on
-/// violations of 1e-11 to 4e-9 m/s (the pyramid and the stack of 50 ended
-/// a quarter of their solves so).
-const ITERATIVE_FLOOR: f64 = 1e-8;
-/// Compliance of the iteratively solved system, relative to each row's
-/// diagonal (constraint-force mixing, as in ODE and Bullet): the solve
-/// meets w = (A + c·diag) p + b. Redundant contacts (four corners of each
-/// face of a stack) make A singular, and their targets differ a little (each
-/// corner mends its own overlap), so the exact system has no answer with
-/// all of them pushing; the subspace step on it took steps of hundreds of
-/// N·s along the redundant directions. With c = 1e-9 every block is
-/// positive definite and the answer unique. A contact holding p closes at
-/// c·diag·p: 1e-9 · 0.3 /kg · 20 N·s = 6e-9 m/s under a stack of 100.
-const ITERATIVE_COMPLIANCE: f64 = 1e-9;
 /// Subspace steps per solve at most, and rejected steps in a row after
 /// which the solve goes on with sweeps alone. Where the pushing set keeps
 /// changing (friction in a settling pile) the steps are rejected and each
@@ -1677,7 +1479,7 @@ fn sequential_impulses(
             let may_step = sweep > 0 || warm_started;
             if may_step && steps_left > 0 && rejected_in_a_row < SUBSPACE_REJECTIONS {
                 steps_left -= 1;
-                match system.subspace_step(&by_body, &mut state) {
+                match subspace::step(&system, &by_body, &mut state) {
                     Step::Kept if system.met(&state) => return (state.p, true, sweep as u32),
                     Step::Kept => rejected_in_a_row = 0,
                     Step::Rejected => rejected_in_a_row += 1,
@@ -1689,209 +1491,6 @@ fn sequential_impulses(
     }
     let met = system.met(&state);
     (state.p, met, max_sweeps as u32)
-}
-
-/// The boxed LCP the iterative solve works on, w = (A + c·diag) p + b with
-/// c = `compliance`, held as its rows (A is never formed).
-pub(super) struct IterativeSystem<'a> {
-    pub(super) rows: &'a [Row],
-    pub(super) diag: &'a [f64],
-    pub(super) b: &'a [f64],
-    pub(super) lo: &'a [f64],
-    pub(super) hi: &'a [f64],
-    pub(super) findex: &'a [Option<usize>],
-    pub(super) compliance: f64,
-    /// How far w may miss the conditions (m/s).
-    pub(super) tolerance: f64,
-}
-
-/// The impulses of an iterative solve and the velocity changes they give
-/// the bodies (M⁻¹Jᵀp), kept in step.
-#[derive(Clone)]
-pub(super) struct IterativeState {
-    pub(super) p: Vec<f64>,
-    pub(super) dv: Vec<Vector3<f64>>,
-    pub(super) dw: Vec<Vector3<f64>>,
-}
-
-/// What became of a subspace step.
-pub(super) enum Step {
-    Kept,
-    Rejected,
-    /// No row was free, or the factorisation failed.
-    NotTaken,
-}
-
-impl<'a> IterativeSystem<'a> {
-    fn new(
-        rows: &'a [Row],
-        diag: &'a [f64],
-        b: &'a [f64],
-        lo: &'a [f64],
-        hi: &'a [f64],
-        findex: &'a [Option<usize>],
-    ) -> Self {
-        let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-        IterativeSystem {
-            rows,
-            diag,
-            b,
-            lo,
-            hi,
-            findex,
-            compliance: ITERATIVE_COMPLIANCE,
-            tolerance: (ITERATIVE_RESIDUAL * scale).max(ITERATIVE_FLOOR),
-        }
-    }
-
-    /// The warm start, clamped to the bounds. A friction row comes after
-    /// its normal row, so its bounds use the normal impulse already started.
-    fn warm_state(&self, warm: &[f64], bodies: usize) -> IterativeState {
-        let mut state = IterativeState {
-            p: vec![0.0f64; self.rows.len()],
-            dv: vec![Vector3::zeros(); bodies],
-            dw: vec![Vector3::zeros(); bodies],
-        };
-        for (i, row) in self.rows.iter().enumerate() {
-            let (l, h) = self.bounds(i, &state.p);
-            let start = warm[i].clamp(l, h);
-            if self.diag[i] > 1e-300 && start.is_finite() && start != 0.0 {
-                state.p[i] = start;
-                row.change_velocities(start, &mut state.dv, &mut state.dw);
-            }
-        }
-        state
-    }
-
-    /// Row i's bounds; a friction row's are its coefficients times its
-    /// normal row's impulse.
-    pub(super) fn bounds(&self, i: usize, p: &[f64]) -> (f64, f64) {
-        match self.findex[i] {
-            None => (self.lo[i], self.hi[i]),
-            Some(k) => (self.lo[i] * p[k].abs(), self.hi[i] * p[k].abs()),
-        }
-    }
-
-    /// w_i = (A p + b)_i + c·A_ii·p_i.
-    pub(super) fn velocity(&self, i: usize, s: &IterativeState) -> f64 {
-        self.b[i] + self.rows[i].velocity(&s.dv, &s.dw) + self.compliance * self.diag[i] * s.p[i]
-    }
-
-    /// Whether the rows that can take an impulse meet the LCP's conditions
-    /// to `tolerance`: w ≥ 0 at a lower bound, w ≤ 0 at an upper one, w = 0
-    /// between.
-    pub(super) fn met(&self, s: &IterativeState) -> bool {
-        (0..self.rows.len()).all(|i| self.miss(i, s) <= self.tolerance)
-    }
-
-    /// The largest amount by which a row misses its condition (m/s).
-    pub(super) fn worst_miss(&self, s: &IterativeState) -> f64 {
-        (0..self.rows.len())
-            .map(|i| self.miss(i, s))
-            .fold(0.0, f64::max)
-    }
-
-    /// How far (m/s) row i misses its condition: w_i below 0 at its lower
-    /// bound, above 0 at its upper one, off 0 between; zero for a row no
-    /// impulse moves. NaN where w_i is (so that `met` fails on it).
-    pub(super) fn miss(&self, i: usize, s: &IterativeState) -> f64 {
-        if self.diag[i] <= 1e-300 {
-            return 0.0;
-        }
-        let wi = self.velocity(i, s);
-        let (l, h) = self.bounds(i, &s.p);
-        match (s.p[i] <= l, s.p[i] >= h) {
-            (true, true) => 0.0,
-            (true, false) if wi >= 0.0 => 0.0,
-            (true, false) => -wi,
-            (false, true) if wi <= 0.0 => 0.0,
-            (false, true) => wi,
-            (false, false) => wi.abs(),
-        }
-    }
-
-    /// How far p is from meeting them, in velocity: the squared length of
-    /// diag·(p − clamp(p − w/diag)), zero exactly at an answer.
-    fn natural_residual(&self, s: &IterativeState) -> f64 {
-        (0..self.rows.len())
-            .filter(|&i| self.diag[i] > 1e-300)
-            .map(|i| {
-                let wi = self.velocity(i, s);
-                let (l, h) = self.bounds(i, &s.p);
-                let r = self.diag[i] * (s.p[i] - (s.p[i] - wi / self.diag[i]).clamp(l, h));
-                r * r
-            })
-            .sum::<f64>()
-    }
-
-    /// One projected Gauss–Seidel sweep over the rows in order.
-    fn sweep(&self, s: &mut IterativeState) {
-        for (i, row) in self.rows.iter().enumerate() {
-            if self.diag[i] <= 1e-300 {
-                continue;
-            }
-            let wi = self.velocity(i, s);
-            let (l, h) = self.bounds(i, &s.p);
-            let new = (s.p[i] - wi / (self.diag[i] * (1.0 + self.compliance))).clamp(l, h);
-            let delta = if new.is_finite() {
-                new - s.p[i]
-            } else {
-                -s.p[i]
-            };
-            s.p[i] += delta;
-            row.change_velocities(delta, &mut s.dv, &mut s.dw);
-        }
-    }
-
-    /// Solves the rows strictly inside their bounds together (see
-    /// `subspace`), then projects onto the bounds in row order (a friction
-    /// row's bound follows its normal row's new impulse). Kept only if it
-    /// brings p closer to meeting the conditions: the projection can spoil
-    /// a step (a row the sweeps took for pushing is clamped to zero, and the
-    /// rest no longer balance). Not "lowers ½pᵀAp + bᵀp": with friction
-    /// bounds that follow the normal impulses the answer is no minimum of
-    /// it, and near the answer good steps raise it (judged that way, a
-    /// stack of 100 swayed 5 mm).
-    pub(super) fn subspace_step(&self, by_body: &[Vec<usize>], s: &mut IterativeState) -> Step {
-        let m = self.rows.len();
-        let free: Vec<usize> = (0..m)
-            .filter(|&i| {
-                let (l, h) = self.bounds(i, &s.p);
-                self.diag[i] > 1e-300 && s.p[i] > l && s.p[i] < h
-            })
-            .collect();
-        let residual: Vec<f64> = free.iter().map(|&i| self.velocity(i, s)).collect();
-        let Some(step) = subspace::free_block_step(
-            self.rows,
-            self.diag,
-            by_body,
-            &free,
-            &residual,
-            self.compliance,
-        ) else {
-            return Step::NotTaken;
-        };
-        let before = s.clone();
-        let residual_before = self.natural_residual(s);
-        let mut target = s.p.clone();
-        for (&i, d) in free.iter().zip(&step) {
-            target[i] += d;
-        }
-        for (i, (row, t)) in self.rows.iter().zip(target).enumerate() {
-            let (l, h) = self.bounds(i, &s.p);
-            let delta = t.clamp(l, h) - s.p[i];
-            if delta != 0.0 && delta.is_finite() {
-                s.p[i] += delta;
-                row.change_velocities(delta, &mut s.dv, &mut s.dw);
-            }
-        }
-        if self.natural_residual(s) < residual_before {
-            Step::Kept
-        } else {
-            *s = before;
-            Step::Rejected
-        }
-    }
 }
 
 /// The interior point on `system` made exact (no compliance), for a
@@ -1948,6 +1547,9 @@ pub fn projected_gauss_seidel(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::body::BodyId;
+    use crate::contact::system::ITERATIVE_COMPLIANCE;
+    use nalgebra::Matrix3;
 
     /// A fixed body (no inverse mass or inertia) at rest at `position`.
     fn fixed_body(position: Vector3<f64>) -> IslandBody {

@@ -11,7 +11,7 @@
 //! the whole load down to rounding. A is J M⁻¹ Jᵀ, so two rows couple only
 //! through a body that moves; a stack's block is banded, a pile's sparse.
 
-use super::solver::{Row, RowSide};
+use super::system::{IterativeState, IterativeSystem, Row, RowSide, Step};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
@@ -37,6 +37,60 @@ pub(super) fn rows_by_body(rows: &[Row], bodies: usize) -> Vec<Vec<usize>> {
         }
     }
     by_body
+}
+
+/// Solves the rows strictly inside their bounds together (see
+/// `subspace`), then projects onto the bounds in row order (a friction
+/// row's bound follows its normal row's new impulse). Kept only if it
+/// brings p closer to meeting the conditions: the projection can spoil
+/// a step (a row the sweeps took for pushing is clamped to zero, and the
+/// rest no longer balance). Not "lowers ½pᵀAp + bᵀp": with friction
+/// bounds that follow the normal impulses the answer is no minimum of
+/// it, and near the answer good steps raise it (judged that way, a
+/// stack of 100 swayed 5 mm).
+pub(super) fn step(
+    system: &IterativeSystem,
+    by_body: &[Vec<usize>],
+    s: &mut IterativeState,
+) -> Step {
+    let m = system.rows.len();
+    let free: Vec<usize> = (0..m)
+        .filter(|&i| {
+            let (l, h) = system.bounds(i, &s.p);
+            system.diag[i] > 1e-300 && s.p[i] > l && s.p[i] < h
+        })
+        .collect();
+    let residual: Vec<f64> = free.iter().map(|&i| system.velocity(i, s)).collect();
+    let Some(step) = free_block_step(
+        system.rows,
+        system.diag,
+        by_body,
+        &free,
+        &residual,
+        system.compliance,
+    ) else {
+        return Step::NotTaken;
+    };
+    let before = s.clone();
+    let residual_before = system.natural_residual(s);
+    let mut target = s.p.clone();
+    for (&i, d) in free.iter().zip(&step) {
+        target[i] += d;
+    }
+    for (i, (row, t)) in system.rows.iter().zip(target).enumerate() {
+        let (l, h) = system.bounds(i, &s.p);
+        let delta = t.clamp(l, h) - s.p[i];
+        if delta != 0.0 && delta.is_finite() {
+            s.p[i] += delta;
+            row.change_velocities(delta, &mut s.dv, &mut s.dw);
+        }
+    }
+    if system.natural_residual(s) < residual_before {
+        Step::Kept
+    } else {
+        *s = before;
+        Step::Rejected
+    }
 }
 
 /// The change δ of the free rows' impulses that zeroes their velocities
