@@ -552,8 +552,11 @@ fn patches_that_bounce(task: &IslandTask, speeds: &[f64]) -> Vec<bool> {
             })
             .unwrap_or(fast.len());
         let any = fast[start..end].iter().any(|&f| f);
-        for k in start..end {
-            bounces[k] = any && closing_allowed(&task.contacts[k], task.dt) == 0.0;
+        for (bounce, c) in bounces[start..end]
+            .iter_mut()
+            .zip(&task.contacts[start..end])
+        {
+            *bounce = any && closing_allowed(c, task.dt) == 0.0;
         }
         start = end;
     }
