@@ -161,18 +161,17 @@ impl MpiExecutor<'_> {
     }
 }
 
-/// Share of a large group's step its first stage takes (`prepare_pairs`;
-/// measured on the 200-body pour's pile: 0.4–0.5).
+/// Share of a large group's step its first stage takes (`prepare_pairs`),
+/// as measured on a pour's pile.
 const FIRST_STAGE_SHARE: f64 = 0.45;
 /// A group's first stage is cut into ranges of at least this many pairs
 /// per rank (below, messages cost more than the share saves).
 const MIN_PREPARED_PAIRS: usize = 16;
 /// Ranges per rank a large group's first stage is cut into (of at least
 /// `MIN_PREPARED_PAIRS` / 2 pairs each), self-scheduled: the pairs' costs
-/// are far from even (on the 200-body pour's pile the second half of the
-/// pairs by body id took three times the first, the bodies dropped last
-/// still falling fast), so one equal range per rank left the ranks with
-/// the cheap ranges waiting.
+/// are far from even (in a pour the bodies dropped last still fall fast),
+/// so one equal range per rank would leave the ranks with the cheap ranges
+/// waiting.
 const PREPARED_CUTS_PER_RANK: usize = 4;
 
 /// How many ranges a group's first stage of `pairs` pairs is cut into,

@@ -19,17 +19,16 @@ pub(super) const COORDINATOR_SHARE: f64 = 0.5;
 /// full speed.
 pub(super) const SELF_SCHEDULED_SHARE: f64 = 1.0;
 /// Chunks of group steps a worker holds at most. Two (the one it steps and
-/// the next, so that it never waits for rank 0 between them) commit the
-/// second chunk while little is known of the first: on the 200-body pour
-/// two ranks took 2.68 s against 2.38 s with one (medians of 5, alternating).
+/// the next, so that it never waits for rank 0 between them) would commit
+/// the second chunk while little is known of the first, which costs more
+/// than the wait saves.
 const CHUNKS_IN_FLIGHT: usize = 1;
 /// A chunk holds at least this share of the work not yet handed out, times
 /// the worker's share of the speed of the ranks taking part (guided
 /// self-scheduling): large chunks while much is left, few messages; small
 /// ones at the end, where an estimate that was off could leave a rank
 /// waiting. By speed, because a stage often ends with every worker's first
-/// chunk: equal chunks gave a rank measured 3× slower as much work as the
-/// others, and the stage waited for it.
+/// chunk, and equal chunks would leave it waiting for the slowest rank.
 const CHUNK_SHARE: f64 = 0.5;
 
 /// How often rank 0 looks for answers while it steps a group of its own

@@ -201,14 +201,10 @@ pub fn closest_features_with_limit(
 pub const TOUCHING_REL_TOL: f64 = 1e-12;
 
 /// A V-Clip answer "apart" by at most this fraction of the smaller
-/// polyhedron's size is checked by the separating-axis test. Features that
-/// nearly meet pass V-Clip's Voronoi tests whatever the interiors do: a box
-/// and a hull both resting on a floor, the box's bottom edge nearly
-/// crossing the hull's, ended apart by 1.7e-12 m while they overlapped by
-/// 0.75 µm (exact, from the hull of A − B); the contact missed the deep
-/// side, which sank 11.8 µm before the step's end, and its impact, placed
-/// at that same instant again, was accepted (docs/stability.md, *Regression scenes*).
-/// At this distance an impact's bisection ends anyway (`TOI_GAP`, 0.1 µm).
+/// polyhedron's size is checked by the separating-axis test: features that
+/// nearly meet pass V-Clip's Voronoi tests whatever the interiors do, so a
+/// pair whose edges nearly cross can be called apart while it overlaps. At
+/// this distance an impact's bisection ends anyway (`TOI_GAP`, 0.1 µm).
 pub const VCLIP_CHECKED_REL: f64 = 1e-6;
 
 /// One polyhedron of the pair, with the map from the other's local frame
@@ -895,7 +891,7 @@ impl SeparatingAxis {
 /// it by this fraction of the smaller polyhedron's size to be chosen: at
 /// equal overlap, face axes give stable face contacts, and nearly parallel
 /// edge pairs only reproduce face normals. Edge axes in other directions
-/// need only beat it (since 34c71c7).
+/// need only beat it.
 pub const EDGE_AXIS_REL_BIAS: f64 = 1e-6;
 
 /// Separating-axis test over the face normals of both polyhedra and the

@@ -409,10 +409,9 @@ impl BlockLu<'_> {
 }
 
 /// Krylov vectors of a GMRES cycle, and cycles at most, that a block solve
-/// may take to bring its residual to `RESIDUAL` (the Newton systems of an
-/// 82-body pile island near its answer came out at 3e-11 and 7e-11 from
-/// the substitution, and two rounds of iterative refinement made them
-/// worse).
+/// may take to bring its residual to `RESIDUAL`: near the answer a pile
+/// island's Newton systems can come out of the substitution just short of
+/// it, and iterative refinement does not mend that.
 const KRYLOV: usize = 12;
 const KRYLOV_CYCLES: usize = 2;
 

@@ -44,26 +44,21 @@ const DENSE_BODIES: usize = 48;
 /// it damps the steps along what the rows leave undetermined (the friction
 /// of redundant corners, free between its bounds with w ≈ 0, swung from
 /// one bound to the other and blocked the steps), and changes no answer
-/// (the residuals are the system's own). On the 547 pile islands of
-/// `docs/benchmarks.md` §5 the misses went from 76 to 49 (1e-9: 53, 1e-8:
-/// 47 but 5 islands beyond 1e-8 m/s, 1e-5: 102).
+/// (the residuals are the system's own). Less leaves those swings; more
+/// slows the steps toward the answer.
 const DAMPING: f64 = 3e-9;
 /// Fraction of the way to the nearest bound a step may go.
 const TO_BOUND: f64 = 0.995;
 /// Newton steps from the first close enough to try the finish after
-/// which the solve stops (and the caller solves as before). A large
-/// island's iterates keep closing in for 20 steps and more (an 82-body
-/// island of 1362 rows: 1e-5, 5e-6, 2e-6 … 8e-8 m/s off the conditions
-/// in its first ten tries): on the 311 islands of the 1000-body pour's
-/// 1.4–1.5 s, 10 tries (and `POLISH_FROM` 3) left 73 islands beyond
-/// 1e-8 m/s in 3.9 s, 25 (and 15) 34 in 2.85 s.
+/// which the solve stops (and the caller solves as before): a large
+/// island's iterates keep closing in for 20 steps and more.
 const FINISH_ATTEMPTS: usize = 25;
 /// Newton steps after which a solve not yet close to the answer stops.
 const FAR_STEPS: usize = 30;
 /// Attempts from which the finish also solves the free rows exactly (the
 /// subspace step: a sparse factorisation of the free rows, most of the
-/// finish's cost; the Newton steps get there by themselves as often: from
-/// 3, 8 or 15 the same islands met, in 3.49, 3.10 and 2.86 s).
+/// finish's cost). Late, because the Newton steps get there by themselves
+/// as often.
 const POLISH_FROM: usize = 15;
 
 /// A row's part in the complementarity.

@@ -410,11 +410,8 @@ const RAY_FRACTION: f64 = 0.1;
 /// Rounds of `LcpWorkspace::settle` (each a fresh factor of the clamped
 /// rows) before a start or resumed pass gives up and restarts from nothing.
 /// In a pile a row sent back to unprocessed shifts its neighbours' x_C,
-/// which can send them back in the next round: on 541 islands captured from
-/// the settling 1000-body pile (1.2-1.3 s), 4 rounds often fell short and
-/// each restart cost a whole fresh pass (708 k pivots in all); with 16
-/// every start and resume settled (the same 322 k pivots with 16, 32 or
-/// 64), 17.0 s -> 12.6 s of solves (medians of 3, interleaved).
+/// which can send them back in the next round, so settling may take many
+/// rounds, and each restart costs a whole fresh pass.
 const RESUME_ROUNDS: usize = 16;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -73,8 +73,7 @@ pub struct IslandContact {
 /// Separating speeds below this (m/s) count as resting in the resting
 /// solve: a stack at rest has contact speeds of rounding size, and letting
 /// them in perturbs its redundant systems enough to send some through the
-/// compliant retry (a stack of 20 took 10× longer). A lifting nut rocks at
-/// about 1e-3 m/s.
+/// compliant retry. A lifting nut rocks at about 1e-3 m/s, far above it.
 const SEPARATING_EPS: f64 = 1e-6;
 
 /// Overlap left alone (metres): rounding, and the band time of impact allows.
@@ -88,10 +87,9 @@ const OVERLAP_RECOVERY: f64 = 0.2;
 /// Overlap (metres) past which the resting solve asks the excess to be gone
 /// by the end of its interval (target 2·excess/h: from rest, a constant
 /// force opens the gap by h·v'/2). Each impact lets a pair 0.1 µm deeper
-/// than it was last solved (`TOI_GAP`), and past the 10 µm tolerance the
-/// recovery above lost that race (random scenes ended at up to 10.3 µm).
-/// Not lower: from 9 µm (e77ea07) the lift fed a bolt wobbling on its rim,
-/// and the 1000-body floor pour ran to its 60 s cap (dropped in 2f041c4).
+/// than it was last solved (`TOI_GAP`), faster than the recovery above
+/// mends near the 10 µm tolerance. Just below it, not lower: a lower
+/// threshold lifts, and so feeds, a body wobbling on its rim.
 const OVERLAP_FIRM: f64 = 0.99 * CONTACT_TOLERANCE;
 
 /// The gap a speculative contact (one apart by more than the contact
@@ -283,10 +281,8 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
 }
 
 /// Contacts closer than this (metres) with normals closer than this count
-/// as one: the copies a body made of convex parts gives where two parts
-/// share a vertex (a nut of 32 parts lying flat had up to 98 points on the
-/// floor; one in sixteen of a settling pile's points was such a copy, equal
-/// to rounding).
+/// as one: the copies, equal to rounding, that a body made of convex parts
+/// gives where two parts share a vertex.
 const COINCIDENT: f64 = 1e-9;
 
 /// An island with its coincident contacts merged, and where each of the
@@ -1345,12 +1341,8 @@ fn solve_normal_rows(a: &[f64], m: usize, b: &[f64], findex: &[Option<usize>]) -
 
 /// Rows from which Dantzig's method takes the system's factors
 /// (`lcp::RowFactors`): its drive's Δw then costs O(rows) a pivot instead
-/// of O(rows · clamped), which on 617 islands of 60–1100 rows from a
-/// settling pile of 1000 took 16 % off the solves. Below, the dense
-/// product is cheap, and the small exact cases keep their rounding: with
-/// the factors, the 1 kg cube under 10 000 kg gained 6e-5 J in 3 s
-/// (`mass_ratios_of_1000_and_10000_hold_with_exact_contact_forces` allows
-/// 1e-5).
+/// of O(rows · clamped). Below, the dense product is cheap, and the small
+/// exact cases (a light cube under a heavy one) keep its finer rounding.
 const FACTORED_MIN_ROWS: usize = 64;
 
 /// Rows from which a system not at rest is solved by the interior-point
@@ -1360,22 +1352,14 @@ const INTERIOR_MIN_ROWS: usize = FACTORED_MIN_ROWS;
 /// Rows from which an island is solved by sequential impulses with the
 /// subspace step instead of Dantzig's method. Dantzig's cost grows with the
 /// cube of the rows, and on redundant systems this large its friction
-/// passes often cycle and fail: the stack of 50 (600–800 rows) failed 100
-/// solves in 5 s and took 242 s, the pyramid (about 300 rows) needed 156
-/// compliant retries and 28 s (5 s of each). Solved iteratively (with the
-/// subspace step) they take 0.6 s and 1.5 s, with no failure and the tops within
-/// 1.2 µm and 8 nm of where they started. Below this the exact method stays: it has no
-/// compliance and no tolerance, and small systems are cheap for it.
-/// (The history, from 1000 rows down: b1cbab1, 7d956f2, 62ac6a9, 4dd1418.)
+/// passes often cycle and fail. Below this the exact method stays: it has
+/// no compliance and no tolerance, and small systems are cheap for it.
 pub const ITERATIVE_MIN_ROWS: usize = 300;
 /// Rows up to which an iterative answer that missed the LCP's conditions is
-/// solved again by Dantzig's method. The stack of 20 at 300 rows had one
-/// such solve in 20 s (227 of 306 rows off by up to 3.4e-6 m/s, the
-/// friction set cycling), and kept, it added 1e-5 J and moved the top
-/// 0.4 µm. Up to 1000 rows, the pour of 1000 had reached only t = 1.27 s
-/// after 8 minutes (1.6 s in 5.6 minutes without the retry), over half of
-/// it in Dantzig's method: its settling islands of 400–1000 rows often miss
-/// the conditions. 400 is where the compliant retry stops too.
+/// solved again by Dantzig's method: a missed answer, kept, adds energy and
+/// moves a resting stack, but a settling pile's larger islands miss often,
+/// and solving them exactly would take most of the run. The compliant
+/// retry stops at the same size.
 const DANTZIG_MAX_ROWS: usize = COMPLIANT_RETRY_ROWS;
 /// Sweeps of the sequential-impulse solve at most; it stops as soon as its
 /// answer meets the LCP's conditions to `ITERATIVE_RESIDUAL`, checked every
@@ -1385,54 +1369,33 @@ const ITERATIVE_SWEEPS: usize = 1000;
 /// that give Dantzig's method its start on systems of `FACTORED_MIN_ROWS`
 /// to `ITERATIVE_MIN_ROWS` rows. The answer stays Dantzig's; the sweeps
 /// keep each friction row within its normal row's bound as they go, so
-/// their sets need fewer friction passes than the last step's impulses:
-/// on 548 islands of 60 rows or more of the 1000-body pour, pivots 269 k
-/// → 183 k, compliant retries 105 → 84, 0.87–0.92 of the time (1000
-/// sweeps: about 0.93; 32 or 64 about as fast as 128).
+/// their sets need fewer friction passes and compliant retries than the
+/// last step's impulses, and a few sweeps get most of that gain.
 const START_SWEEPS: usize = 128;
 /// Sweeps of the sequential-impulse solve at most where it starts from the
 /// answer of an interior-point solve that missed the conditions (from
 /// `ITERATIVE_MIN_ROWS` rows; below `DANTZIG_MAX_ROWS` Dantzig's method
 /// then starts from theirs). That answer is close where the last step's
-/// impulses are not: on 157 islands of 600–2820 rows of the 1000-body
-/// pour (seed 3) whose interior solve missed, 200 sweeps from it met the
-/// conditions on 24 and missed them by 1.6e-6 m/s in the median, 3.0e-5 at
-/// the 90th percentile and 3.5e-4 at worst, where 1000 from the last
-/// step's impulses met none and missed by 2.9e-5, 1.2e-4 and 7.8e-4, in
-/// 0.29 of the time (1000 from it: 8.3e-7, 1.8e-5, 2.6e-4, 27 met, in
-/// 0.92 of the time). Alone, it misses by 6.7e-5 in the median and by
-/// 0.16 at worst.
+/// impulses are not, so a fraction of `ITERATIVE_SWEEPS` from it ends
+/// nearer the conditions than all of them from those impulses would.
 const SWEEPS_AFTER_INTERIOR: usize = 200;
 /// Sweeps a system of more than 48 moving bodies (`interior::is_large`)
-/// takes before the interior point: the stack of 100's solves that miss
-/// the conditions in 8 sweeps meet them in 16, where the interior point
-/// took 21 Newton steps of its 600 unknowns (20 s of the stack: 3.4 s with
-/// the sweeps, 12.9 s with the interior point after 8); a settling pile's
-/// 82-body islands of 1400 rows do not meet them in 1000. With 64 (before
-/// `SWEEPS_AFTER_INTERIOR`), 27 of 628 pile islands of 600–2820 rows met
-/// the conditions in the sweeps; with 16, 7 do and the interior point
-/// meets the rest, in 0.93 of the time (21.4 s against 23.0 s), the
-/// stacks of 50 and 100 and the pyramid on the same state hashes.
+/// takes before the interior point: a tall stack's solves meet the
+/// conditions in this many, far cheaper than the interior point's Newton
+/// steps, while a settling pile's large islands do not meet them in any
+/// affordable number, so more sweeps would only delay the interior point.
 const SWEEPS_BEFORE_LARGE_INTERIOR: usize = 16;
 /// How far (m/s) the last step's impulses may miss the conditions and
 /// still be Dantzig's start without the start sweeps. A system at rest
 /// needs nearly the same impulses every step, and its sweeps would cost a
-/// subspace factorisation each step for nothing: the stack of ten took
-/// 1.8 s for 20 s with start sweeps in every solve, 1.17 s with this (its
-/// last step's impulses miss by 2e-9 to 2e-5 m/s once it stands; a
-/// settling pile's by 1e-2 m/s in the median, 3e-5 at the 5th
-/// percentile). The stack's first solves, while its contact points come
-/// and go, still take the sweeps and find another distribution of the
-/// same load over its redundant corners: it settles by 0.4 nm, then
-/// stands to the last bit (10 000 s).
+/// subspace factorisation each step for nothing; a standing stack's
+/// impulses miss by less than this, a settling pile's mostly by far more.
 const WARM_CLOSE: f64 = 1e-4;
 const ITERATIVE_CHECK_EVERY: usize = 8;
 /// Subspace steps per solve at most, and rejected steps in a row after
 /// which the solve goes on with sweeps alone. Where the pushing set keeps
 /// changing (friction in a settling pile) the steps are rejected and each
-/// costs a factorisation: 5 steps of the pile of 1000 took 22 s with a step
-/// after every block of sweeps, 7.5 s with these (the same answers: every
-/// counter equal).
+/// costs a factorisation, so the solve stops trying them.
 const SUBSPACE_STEPS: usize = 32;
 const SUBSPACE_REJECTIONS: usize = 3;
 

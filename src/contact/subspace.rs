@@ -220,10 +220,8 @@ const SYMBOLIC_KEPT: usize = 4;
 /// faer factors a block by dense supernodes where its flops per factor
 /// entry exceed 40 times this (its default, 1.0, keeps every block here
 /// simplicial). At 0.5 the pyramid's blocks (each cube's rows coupled with
-/// the two cubes below it and the two above) go supernodal, and its solves
-/// take 0.69 of the time; the stacks' banded blocks (20, 50, 100 cubes)
-/// stay simplicial, their answers unchanged to the bit. At 0.25 some of
-/// the stack of 100's go supernodal too.
+/// the two cubes below it and the two above) go supernodal, which is
+/// faster, while the stacks' banded blocks stay simplicial.
 const SUPERNODAL_THRESHOLD: SupernodalThreshold = SupernodalThreshold(0.5);
 
 /// A kept symbolic factorisation, the pattern it was made for (column

@@ -188,26 +188,22 @@ impl RowFactorsOf {
 /// largest |b| of the system and `ITERATIVE_FLOOR`, on the side its bound
 /// does not allow (w ≥ 0 at a lower bound, w ≤ 0 at an upper one, w = 0
 /// between). Once the pushing set is right the subspace step is exact, so
-/// the tolerance can be tight: at 1e-6 of |b| (1e-7 m/s at rest) the
-/// pyramid solved iteratively gained 2.9e-6 J in 3 s, its cubes drifting up
-/// by up to 1 nm a step; at the floor it gains none.
+/// the tolerance can be tight, and must be: a looser one lets a resting
+/// pyramid gain energy, its cubes drifting up a little every step.
 const ITERATIVE_RESIDUAL: f64 = 1e-9;
 /// The least tolerance (m/s): 0.1 nm of approach over a 10 ms step. It
 /// decides for every system slower than 10 m/s. An impact solve of
-/// rounding-size approaches (|b| ≈ 1e-8 m/s) would otherwise ask for
-/// 1e-14 m/s; there most contacts neither push nor move apart, the pushing
-/// set flips between checks, and the solve spent all its sweeps on
-/// violations of 1e-11 to 4e-9 m/s (the pyramid and the stack of 50 ended
-/// a quarter of their solves so).
+/// rounding-size approaches would otherwise ask for far less; there most
+/// contacts neither push nor move apart, the pushing set flips between
+/// checks, and the solve would spend all its sweeps on rounding.
 const ITERATIVE_FLOOR: f64 = 1e-8;
 /// Compliance of the iteratively solved system, relative to each row's
 /// diagonal (constraint-force mixing, as in ODE and Bullet): the solve
 /// meets w = (A + c·diag) p + b. Redundant contacts (four corners of each
 /// face of a stack) make A singular, and their targets differ a little (each
 /// corner mends its own overlap), so the exact system has no answer with
-/// all of them pushing; the subspace step on it took steps of hundreds of
-/// N·s along the redundant directions. With c = 1e-9 every block is
-/// positive definite and the answer unique. A contact holding p closes at
+/// all of them pushing. With c = 1e-9 every block is positive definite and
+/// the answer unique; the price is that a contact holding p closes at
 /// c·diag·p: 1e-9 · 0.3 /kg · 20 N·s = 6e-9 m/s under a stack of 100.
 pub(super) const ITERATIVE_COMPLIANCE: f64 = 1e-9;
 

@@ -59,8 +59,8 @@ enum Job {
 /// Samples the writer thread may hold before `sample` waits for it.
 const SAMPLES_IN_FLIGHT: usize = 64;
 
-/// Bytes the writer gathers before each write to the file: std's 8 KiB
-/// made 1250 system calls for the 200-body pour's 2 s of rows.
+/// Bytes the writer gathers before each write to the file: large enough
+/// that a run's rows take a few system calls, not one per 8 KiB (std's).
 const WRITE_BUFFER: usize = 1 << 20;
 
 /// The writer thread's side: the file and what it holds.

@@ -16,8 +16,7 @@ const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// enough to read their shape against the background.
 const AMBIENT: f32 = 0.3;
 /// Multisampling on real GPUs, where it is nearly free. Not on CPU adapters
-/// (lavapipe, llvmpipe): there 4x tripled the frame time (1280x720, 50
-/// bodies: 5-6 ms -> 17-28 ms; an empty frame 1.3 -> 7.4 ms), and the
+/// (lavapipe, llvmpipe): there it multiplies the frame time, and the
 /// render rank must keep up with the simulation.
 const MSAA_SAMPLES: u32 = 4;
 

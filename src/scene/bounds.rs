@@ -50,8 +50,8 @@ pub const MAX_STEPS: u64 = 1_000_000_000;
 pub const MAX_SPEED: f64 = 1e6;
 
 /// Largest acceleration gravity or a force may give a body, m/s² (10⁸ g):
-/// even at it a body takes a millisecond to reach the speed bound, where
-/// `gravity = [0, 0, -1e308]` went past it in the first step.
+/// even at it a body takes a millisecond to reach the speed bound, so no
+/// single step can carry it far past that bound.
 pub const MAX_ACCELERATION: f64 = 1e9;
 
 type Checked = Result<(), (String, String)>;

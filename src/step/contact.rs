@@ -108,13 +108,9 @@ impl SolvedTogether {
 /// Angle (radians) a body may turn on the constant forces of one contact
 /// solve before its island is solved again. The resting solve predicts each
 /// contact's motion to second order (Baraff's curvature term); what it
-/// leaves is of third order in ω·h, and for fast spinners that is not
-/// small: a prism spinning at 30 rad/s on one corner had its gap curving in
-/// at 175 m/s², and the force that held it, kept for the whole 10 ms step
-/// while the corner swung off the floor, added 4.85 J in one step (2.6e-3 of
-/// the scene's energy scale); a 0.1 kg box spinning at 8 rad/s on a tipping
-/// hull sank 7.5 µm in the 8 ms after its contact was solved. At 0.05 rad
-/// the third-order slip is about r·θ³/6, 2 µm on a 0.1 m lever.
+/// leaves is of third order in ω·h, and for fast spinners it adds energy or
+/// lets a corner sink. At 0.05 rad the third-order slip is about r·θ³/6,
+/// 2 µm on a 0.1 m lever.
 pub const SPIN_TRUST: f64 = 0.05;
 /// At most this many such re-solves of one island in a step (the shortest
 /// interval between two is dt divided by this).

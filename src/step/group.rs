@@ -42,12 +42,9 @@ use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Share of its radius by which each predicted swept sphere grows when the
-/// groups are formed (`plan_groups`; not for the pairs tested). Measured on
-/// the first 0.6 s of the 1000-body pour: without it 51 groups re-ran
-/// (the pile's group each time) and the step took 16.4 s; with 1 cm on
-/// the 4 cm parts (a quarter of a sphere's radius) one did, in 11.4 s; at
-/// 3 cm none, in 11.6 s (larger groups cost more per event). Results do
-/// not depend on it (same state hash).
+/// groups are formed (`plan_groups`; not for the pairs tested): without it
+/// a pile's group often re-runs, with more the groups grow and each event
+/// costs more. Results do not depend on it.
 pub const GROUP_MARGIN: f64 = 0.25;
 
 /// What the whole world holds when the impact stage starts (world indices),
@@ -720,26 +717,20 @@ fn find_leaks(
 /// Dynamic members from which a group is split into the parts its pairs'
 /// first stage says interact (`split_group`). A pile is one group by its
 /// swept spheres (every body near another), but most of its bodies meet
-/// few of the others within a step: in the 1000-body pour's pile (one
-/// group of about 600 moving bodies from 1.0 s to 1.1 s) the parts
-/// number 320-400, the largest 21-77 bodies. Below this a group is cheap
-/// enough whole.
+/// few of the others within a step, so it falls into many small parts.
+/// Below this a group is cheap enough whole.
 pub const SPLIT_MIN_MEMBERS: usize = 16;
 /// The fewest bodies of a group that the executor splits of its own
 /// accord (`Executor::split_groups`): a pile. Smaller groups that hold the
 /// others up are mostly bodies pouring in, whose parts meet so often that
-/// the runs lost cost more than the sharing gains (the 200-body pour on two
-/// ranks: 1.77 s split against 1.59 s whole, medians of 5, its largest
-/// group 159 bodies).
+/// the runs lost cost more than the sharing gains.
 pub const SPLIT_AUTO_MIN_MEMBERS: usize = 256;
 
 /// Gap (m) at the step's end within which a pair one of whose bodies has a
 /// predicted impact stays in one part: the impact sends its bodies off
 /// their paths, often into such neighbours, and parts that meet step again.
-/// On the 1000-body pile from 1.0 s to 1.1 s (`docs/benchmarks.md` §4,
-/// *Split groups*): without it 192 groups stepped again, a third of the
-/// work, with 0.5 mm 69 (the largest part's share 0.39 → 0.55), with 1, 2
-/// and 4 mm 42, 24 and 14 (0.61, 0.85, 0.90).
+/// A wider gap means fewer such reruns but larger parts, which leave less
+/// to share out (`docs/benchmarks.md` §4, *Split groups*).
 pub const SPLIT_NEAR_IMPACT: f64 = 5e-4;
 
 /// A group split into parts (`split_group`): what the parts' runs are

@@ -195,12 +195,9 @@ impl Executor for Inline {
 /// impact's two bodies) before the overlaps left on its pairs are accepted.
 /// The count is each body's own, not its group's, so what a group decides
 /// depends only on the bodies its events touch, and a group split into
-/// parts decides as it would whole. 256 is what a group of up to 64
-/// moving bodies had to share before: a body chattering against a wall or
-/// between two neighbours still stops there, while 1000 nuts and bolts
-/// landing (up to 733 events in a step, one or two a body) are far from
-/// it; a shared budget of 256 left 4644 overlaps up to 4.6 cm deep in
-/// their first 0.6 s.
+/// parts decides as it would whole. A body chattering against a wall or
+/// between two neighbours soon reaches it, while bodies landing in a pour
+/// take one or two events each.
 pub const EVENTS_PER_BODY: usize = 256;
 /// How many times an impact may give way to an earlier one found in its
 /// group (`Region::earlier_impact`) before it is taken as it is.

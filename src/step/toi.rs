@@ -26,7 +26,7 @@ pub const RATCHET_GAP: f64 = 0.1 * TOI_GAP;
 /// solved may be before an impact is placed: `TOI_GAP` deeper, but not past
 /// `CONTACT_TOLERANCE − RATCHET_GAP` unless it already was, and never less
 /// than `RATCHET_GAP` deeper (each event must make progress). With
-/// `TOI_GAP` for every point (before 22ce855) a pair starting a step 9.95 µm
+/// `TOI_GAP` for every point a pair starting a step 9.95 µm
 /// deep ended it at 10.05 µm unseen, and one that closed again after each
 /// impact ratcheted 0.1 µm per event (9 of 1200 sweep scenes ended up to
 /// 0.14 µm past the tolerance; docs/stability.md, *Regression scenes*).
