@@ -225,8 +225,8 @@ pub fn run_driven(
     let (mut world, marks, mut traj, continued) = match resume {
         None => {
             let mut world = World::new(scene);
-            world.sleep_enabled = !opts.no_sleep;
-            world.split_groups = opts.split_groups;
+            world.switches.sleep_enabled = !opts.no_sleep;
+            world.switches.split_groups = opts.split_groups;
             let traj = TrajectoryWriter::create(&traj_path, marking)
                 .map_err(|e| io(e, "trajectory.csv"))?;
             (world, None, traj, Continued::New)
@@ -241,7 +241,7 @@ pub fn run_driven(
             ));
             last_good = Some((ck.source().to_path_buf(), time));
             let mut world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
-            world.split_groups = opts.split_groups;
+            world.switches.split_groups = opts.split_groups;
             let (traj, continued) =
                 TrajectoryWriter::resume(&traj_path, marks.trajectory, time, marking)
                     .map_err(|e| io(e, &traj_path.display().to_string()))?;

@@ -302,13 +302,7 @@ impl Hands {
 pub fn reset(world: &mut World) {
     let mut fresh = World::new(world.scene.clone());
     fresh.steps = world.steps;
-    fresh.sleep_enabled = world.sleep_enabled;
-    fresh.sleep_after = world.sleep_after;
-    fresh.skip_separating = world.skip_separating;
-    fresh.warm_start = world.warm_start;
-    fresh.iterative_min_rows = world.iterative_min_rows;
-    fresh.group_margin = world.group_margin;
-    fresh.split_groups = world.split_groups;
+    fresh.switches = world.switches;
     fresh.stage = std::mem::take(&mut world.stage);
     fresh.counters = std::mem::take(&mut world.counters);
     fresh.max_penetration = world.max_penetration;

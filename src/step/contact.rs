@@ -221,7 +221,7 @@ impl Region<'_> {
                 let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
                 let rules = &self.st.settings;
                 let frame_a = pose(&seg[t.a.index()].state).inverse();
-                let mut last = if self.st.warm_start {
+                let mut last = if self.st.switches.warm_start {
                     self.warm.get(&(t.a, t.b)).cloned().unwrap_or_default()
                 } else {
                     Vec::new()
@@ -315,7 +315,7 @@ impl Region<'_> {
                 contacts,
                 dt: h,
                 restitution_threshold,
-                iterative_min_rows: self.st.iterative_min_rows as u32,
+                iterative_min_rows: self.st.switches.iterative_min_rows as u32,
             });
         }
         self.counters.islands += tasks.len() as u64;

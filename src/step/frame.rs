@@ -46,7 +46,7 @@ pub(super) fn step_world(
         seg: solved.seg,
         end,
         pairs,
-        grown: grow(proxies, w.st.group_margin),
+        grown: grow(proxies, w.st.switches.group_margin),
         since: solved.since,
         separating: solved.separating,
         together: solved.together,

@@ -25,6 +25,7 @@
 //! group had been one from the start, whatever the number of ranks.
 
 use super::Executor;
+use super::StepSwitches;
 use super::contact::{SolvedTogether, SpinResolves, Touching, WarmContact};
 use super::impacts::step_group;
 use super::region::{PairKey, PairMap, Region, Segment, StepStatic};
@@ -403,13 +404,7 @@ pub fn prepare_pairs(
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct GroupParams {
     t0: f64,
-    skip_separating: bool,
-    warm_start: bool,
-    iterative_min_rows: usize,
-    sleep_enabled: bool,
-    sleep_after: f64,
-    group_margin: f64,
-    split_groups: bool,
+    switches: StepSwitches,
 }
 
 impl GroupParams {
@@ -417,26 +412,14 @@ impl GroupParams {
     pub(crate) fn of_world(w: &super::World, t0: f64) -> Self {
         GroupParams {
             t0,
-            skip_separating: w.skip_separating,
-            warm_start: w.warm_start,
-            iterative_min_rows: w.iterative_min_rows,
-            sleep_enabled: w.sleep_enabled,
-            sleep_after: w.sleep_after,
-            group_margin: w.group_margin,
-            split_groups: w.split_groups,
+            switches: w.switches,
         }
     }
 
     pub(crate) fn of(st: &StepStatic) -> Self {
         GroupParams {
             t0: st.t0,
-            skip_separating: st.skip_separating,
-            warm_start: st.warm_start,
-            iterative_min_rows: st.iterative_min_rows,
-            sleep_enabled: st.sleep_enabled,
-            sleep_after: st.sleep_after,
-            group_margin: st.group_margin,
-            split_groups: st.split_groups,
+            switches: st.switches,
         }
     }
 
@@ -447,13 +430,7 @@ impl GroupParams {
             settings: &scene.settings,
             forces: &scene.forces,
             t0: self.t0,
-            skip_separating: self.skip_separating,
-            warm_start: self.warm_start,
-            iterative_min_rows: self.iterative_min_rows,
-            sleep_enabled: self.sleep_enabled,
-            sleep_after: self.sleep_after,
-            group_margin: self.group_margin,
-            split_groups: self.split_groups,
+            switches: self.switches,
         }
     }
 }
@@ -1058,7 +1035,7 @@ pub(crate) fn step_groups<'s>(
     let whole = plan_groups(world, start);
     // `--split-groups` splits them all; otherwise the executor chooses
     // (and measures its choice).
-    let chosen = if st.split_groups {
+    let chosen = if st.switches.split_groups {
         vec![true; whole.len()]
     } else {
         exec.split_groups(

@@ -33,6 +33,7 @@ mod kept;
 mod region;
 mod sleep;
 pub mod stats;
+mod switches;
 mod toi;
 
 pub use crate::scene::bounds::MAX_SPEED;
@@ -45,6 +46,7 @@ pub use group::{
 pub use region::StepStatic;
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
 pub use stats::{Counters, NumericalFailure, StageSeconds};
+pub use switches::StepSwitches;
 pub use toi::{RATCHET_GAP, TOI_GAP};
 
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
@@ -225,27 +227,8 @@ pub struct World {
     /// The bodies that fell below `fall_z`, in the order they fell (by
     /// body id within a step).
     pub fallen: Vec<Fall>,
-    /// Enables resting systems (on by default; analytic tests may switch it off).
-    pub sleep_enabled: bool,
-    pub sleep_after: f64,
-    /// Enables the separating-pair skip (on by default; a test compares).
-    pub skip_separating: bool,
-    /// Starts iterative solves from the last forces (on by default; a test
-    /// compares).
-    pub warm_start: bool,
-    /// Islands of this many rows or more are solved by sequential impulses
-    /// (`solver::ITERATIVE_MIN_ROWS`; a test lowers it to make a small
-    /// stack iterative).
-    pub iterative_min_rows: usize,
-    /// Share of its radius by which each predicted sphere grows when the
-    /// groups are formed (`group::GROUP_MARGIN` by default; results do not
-    /// depend on it, a test compares).
-    pub group_margin: f64,
-    /// Splits large groups into the parts that interact within the step
-    /// (`group::split_group`; off by default, `--split-groups`): the same
-    /// answers where the parts meet nothing else, more work on one rank,
-    /// smaller units to share over many.
-    pub split_groups: bool,
+    /// How the run asks the step to work (`StepSwitches`).
+    pub switches: StepSwitches,
     pub(crate) touching: Vec<Touching>,
     /// Contacts of the impacts solved during the last step, for the
     /// separating-pair skip (only an optimisation: not checkpointed).
@@ -277,13 +260,7 @@ impl World {
             counters: Counters::default(),
             max_penetration: 0.0,
             fallen: Vec::new(),
-            sleep_enabled: true,
-            sleep_after: 0.5,
-            skip_separating: true,
-            warm_start: true,
-            iterative_min_rows: solver::ITERATIVE_MIN_ROWS,
-            group_margin: group::GROUP_MARGIN,
-            split_groups: false,
+            switches: StepSwitches::default(),
             touching: Vec::new(),
             impacts: Vec::new(),
             group_work: GroupWork::new(n),

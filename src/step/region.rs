@@ -8,6 +8,7 @@
 //! and a group's result never depends on which other bodies the world holds.
 
 use super::Executor;
+use super::StepSwitches;
 use super::contact::{Touching, WarmContact};
 use super::kept::{self, Kept};
 use super::stats::{Counters, StageSeconds};
@@ -34,15 +35,7 @@ pub struct StepStatic<'s> {
     pub(crate) forces: &'s [ForceWindow],
     /// Simulated time at the step's start.
     pub(crate) t0: f64,
-    pub(crate) skip_separating: bool,
-    pub(crate) warm_start: bool,
-    pub(crate) iterative_min_rows: usize,
-    pub(crate) sleep_enabled: bool,
-    pub(crate) sleep_after: f64,
-    /// `World::group_margin`.
-    pub(crate) group_margin: f64,
-    /// `World::split_groups`.
-    pub(crate) split_groups: bool,
+    pub(crate) switches: StepSwitches,
 }
 
 /// A body pair in local indices, `a < b`.
@@ -282,7 +275,7 @@ impl<'s> Region<'s> {
         touching: &[Touching],
         seg: &[Segment],
     ) -> PairMap<Vector3<f64>> {
-        if !self.st.skip_separating {
+        if !self.st.switches.skip_separating {
             return PairMap::default();
         }
         let velocity_at = |i: usize, p: &Vector3<f64>| self.point_velocity(i, &seg[i].state, p);

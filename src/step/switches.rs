@@ -1,0 +1,45 @@
+//! The step's switches: how a run asks the step to work (test aids and
+//! measurements), held once by the world and sent with every group, the
+//! same on every rank.
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepSwitches {
+    /// Enables resting systems (on by default; analytic tests may switch it off).
+    pub sleep_enabled: bool,
+    /// Seconds a body stays slow before it rests.
+    pub sleep_after: f64,
+    /// Enables the separating-pair skip (on by default; a test compares).
+    pub skip_separating: bool,
+    /// Starts iterative solves from the last forces (on by default; a test
+    /// compares).
+    pub warm_start: bool,
+    /// Islands of this many rows or more are solved by sequential impulses
+    /// (`solver::ITERATIVE_MIN_ROWS`; a test lowers it to make a small
+    /// stack iterative).
+    pub iterative_min_rows: usize,
+    /// Share of its radius by which each predicted sphere grows when the
+    /// groups are formed (`group::GROUP_MARGIN` by default; results do not
+    /// depend on it, a test compares).
+    pub group_margin: f64,
+    /// Splits large groups into the parts that interact within the step
+    /// (`group::split_group`; off by default, `--split-groups`): the same
+    /// answers where the parts meet nothing else, more work on one rank,
+    /// smaller units to share over many.
+    pub split_groups: bool,
+}
+
+impl Default for StepSwitches {
+    fn default() -> Self {
+        StepSwitches {
+            sleep_enabled: true,
+            sleep_after: 0.5,
+            skip_separating: true,
+            warm_start: true,
+            iterative_min_rows: crate::contact::solver::ITERATIVE_MIN_ROWS,
+            group_margin: super::group::GROUP_MARGIN,
+            split_groups: false,
+        }
+    }
+}
