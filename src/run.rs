@@ -27,7 +27,7 @@ pub struct RunOptions {
     pub no_progress: bool,
     pub no_sleep: bool,
     /// Split large interaction groups into the parts that interact within
-    /// a step (`World::split_groups`).
+    /// a step (`StepSwitches::split_groups`).
     pub split_groups: bool,
     /// Write `checkpoint.bin` every this many simulated seconds (and at the end).
     pub checkpoint_every: Option<f64>,

@@ -86,7 +86,7 @@ pub trait Executor {
     /// would hold up the ranks sharing the group steps, where splitting
     /// measures faster. The choice changes the time, not the answer: a
     /// split group ends as it would whole (`docs/architecture.md`). One
-    /// rank splits none (unless `World::split_groups` asks for all).
+    /// rank splits none (unless `StepSwitches::split_groups` asks for all).
     fn split_groups(&mut self, groups: &[(f64, usize)]) -> Vec<bool> {
         vec![false; groups.len()]
     }
