@@ -7,12 +7,12 @@
 use super::Executor;
 use super::kept::{self, Kept};
 use super::region::{Region, Segment, pose};
+use super::touching::{Touching, WarmContact};
 use crate::body::BodyId;
 use crate::collision::manifold::ContactPoint;
 use crate::contact::island;
 use crate::contact::solver::{IslandBody, IslandContact, IslandTask, SPECULATIVE_GAP};
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -115,38 +115,6 @@ pub const SPIN_TRUST: f64 = 0.05;
 /// At most this many such re-solves of one island in a step (the shortest
 /// interval between two is dt divided by this).
 pub const MAX_SPIN_RESOLVES_PER_STEP: f64 = 8.0;
-
-/// Contacts of one touching body pair at the current time, and its points
-/// apart by more than the contact tolerance but near enough to close within
-/// a step at the speculative speed (`Settings::near_distance`): the
-/// speculative contacts of the contact solve. A pair may have only those.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub(crate) struct Touching {
-    pub(crate) a: BodyId,
-    pub(crate) b: BodyId,
-    pub(crate) points: Vec<ContactPoint>,
-    pub(crate) near: Vec<ContactPoint>,
-}
-
-impl Touching {
-    /// Whether the pair touches (within the contact tolerance), not only
-    /// comes near: what wakes, sleeps and groups bodies together.
-    pub(crate) fn touches(&self) -> bool {
-        !self.points.is_empty()
-    }
-}
-
-/// The resting force one contact point held in the last solve of its pair:
-/// where (in A's body frame) and how much. The next solve of the pair starts
-/// its iterative solve from these (`IslandContact::warm_force`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub(crate) struct WarmContact {
-    pub(crate) local: Vector3<f64>,
-    pub(crate) normal: f64,
-    pub(crate) friction: Vector3<f64>,
-    /// The approach a speculative contact here deferred (`IslandResult::carried`).
-    pub(crate) approach: f64,
-}
 
 /// A contact point of an island task: its body pair and where it is in A's
 /// body frame (the key its resting force is kept under for the warm start).

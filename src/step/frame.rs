@@ -1,11 +1,12 @@
 //! One step of the whole world, as SPEC 2.1's frame loop: each stage a
 //! function of its own, in the order the step takes them.
 
-use super::contact::{SpinResolves, Touching};
+use super::contact::SpinResolves;
 use super::group::{self, GroupOutput, StepStart};
 use super::region::{PairKey, PairMap, Region, Segment};
 use super::stats::{GroupWork, NumericalFailure};
 use super::toi::{Since, SolvedSince};
+use super::touching::Touching;
 use super::{Executor, check_states};
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::SphereProxy;

@@ -26,11 +26,12 @@
 
 use super::Executor;
 use super::StepSwitches;
-use super::contact::{SolvedTogether, SpinResolves, Touching, WarmContact};
+use super::contact::{SolvedTogether, SpinResolves};
 use super::impacts::step_group;
 use super::region::{PairKey, PairMap, Region, Segment, StepStatic};
 use super::stats::{Counters, NumericalFailure, StageSeconds};
 use super::toi::{Since, SolvedSince};
+use super::touching::{Touching, WarmContact};
 use crate::body::Body;
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::{self, SphereProxy};

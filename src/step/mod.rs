@@ -35,10 +35,10 @@ mod sleep;
 pub mod stats;
 mod switches;
 mod toi;
+mod touching;
 
 pub use crate::scene::bounds::MAX_SPEED;
 pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
-pub(crate) use contact::{Touching, WarmContact};
 pub use group::{
     GROUP_MARGIN, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PreparedPairs,
     SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group,
@@ -48,6 +48,7 @@ pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
 pub use stats::{Counters, NumericalFailure, StageSeconds};
 pub use switches::StepSwitches;
 pub use toi::{RATCHET_GAP, TOI_GAP};
+pub(crate) use touching::{Touching, WarmContact};
 
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};

@@ -9,9 +9,9 @@
 
 use super::Executor;
 use super::StepSwitches;
-use super::contact::{Touching, WarmContact};
 use super::kept::{self, Kept};
 use super::stats::{Counters, StageSeconds};
+use super::touching::{Touching, WarmContact};
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::broadphase::{self, SphereProxy};
 use crate::collision::narrowphase::{
