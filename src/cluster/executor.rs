@@ -66,6 +66,19 @@ pub struct MpiExecutor<'w> {
     pub(super) solve_choice: schedule::StageChoice,
 }
 
+impl MpiExecutor<'_> {
+    /// Runs a distributed stage: its time counts as distributable, and the
+    /// bytes it moved teach the link's cost model.
+    fn in_stage<R>(&mut self, stage: Stage, run: impl FnOnce(&mut Self) -> R) -> R {
+        self.clock.enter();
+        let mark = self.traffic_mark(stage);
+        let r = run(self);
+        self.learn_traffic(stage, mark);
+        self.dist.distributable_s += self.clock.leave();
+        r
+    }
+}
+
 impl<'w> MpiExecutor<'w> {
     pub fn new(world: &'w SimpleCommunicator, roles: Roles, objects: &[ObjectDef]) -> Self {
         let slots = roles.workers.len() + 1;
@@ -165,21 +178,11 @@ impl Executor for MpiExecutor<'_> {
     }
 
     fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult> {
-        self.clock.enter();
-        let mark = self.traffic_mark(Stage::Narrowphase);
-        let r = self.narrowphase_stage(objects, tasks);
-        self.learn_traffic(Stage::Narrowphase, mark);
-        self.dist.distributable_s += self.clock.leave();
-        r
+        self.in_stage(Stage::Narrowphase, |e| e.narrowphase_stage(objects, tasks))
     }
 
     fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
-        self.clock.enter();
-        let mark = self.traffic_mark(Stage::SolveIslands);
-        let r = self.solve_islands_stage(tasks);
-        self.learn_traffic(Stage::SolveIslands, mark);
-        self.dist.distributable_s += self.clock.leave();
-        r
+        self.in_stage(Stage::SolveIslands, |e| e.solve_islands_stage(tasks))
     }
 
     fn step_groups(
@@ -188,12 +191,9 @@ impl Executor for MpiExecutor<'_> {
         params: &GroupParams,
         inputs: Vec<GroupInput>,
     ) -> Vec<GroupReply> {
-        self.clock.enter();
-        let mark = self.traffic_mark(Stage::StepGroups);
-        let r = self.step_groups_stage(st, params, inputs);
-        self.learn_traffic(Stage::StepGroups, mark);
-        self.dist.distributable_s += self.clock.leave();
-        r
+        self.in_stage(Stage::StepGroups, |e| {
+            e.step_groups_stage(st, params, inputs)
+        })
     }
 
     fn prepare_groups(
@@ -202,12 +202,9 @@ impl Executor for MpiExecutor<'_> {
         params: &GroupParams,
         inputs: Vec<GroupInput>,
     ) -> Vec<PreparedPairs> {
-        self.clock.enter();
-        let mark = self.traffic_mark(Stage::StepGroups);
-        let r = self.prepare_groups_stage(st, params, inputs);
-        self.learn_traffic(Stage::StepGroups, mark);
-        self.dist.distributable_s += self.clock.leave();
-        r
+        self.in_stage(Stage::StepGroups, |e| {
+            e.prepare_groups_stage(st, params, inputs)
+        })
     }
 
     fn split_groups(&mut self, groups: &[(f64, usize)]) -> Vec<bool> {
