@@ -5,6 +5,7 @@ mod block_lu;
 mod interior;
 pub mod island;
 pub mod lcp;
+mod pile_sweeps;
 pub mod solver;
 mod subspace;
 mod system;

@@ -28,6 +28,7 @@
 //! direction the external forces push), so kinetic friction is exactly
 //! opposite the slip and isotropic; the second direction is perpendicular.
 
+use super::pile_sweeps::{self, PileSweepSettings};
 pub use super::system::IslandBody;
 use super::system::{IterativeSystem, Row, RowFactorsOf, Step};
 use super::{lcp, subspace};
@@ -813,28 +814,34 @@ fn solve_phase(
         let sum = normal_sum(&p);
         (p, sum)
     };
-    // The bodies the interior point's Newton systems would move, counted
-    // once (where it may be tried at all).
-    let interior_moving = (m >= INTERIOR_MIN_ROWS
+    // Large islands of many moving bodies (piles): the large-island
+    // method alone (`pile_sweeps`).
+    if m >= task.iterative_min_rows as usize
+        && super::interior::is_large(super::interior::moving_count(&rows, v.len()))
+    {
+        let answer = pile_sweeps::solve(&system, &warm, v.len(), &PileSweepSettings::default());
+        stats.iterative_solves += 1;
+        stats.iterative_sweeps += answer.sweeps as u64;
+        if !answer.met {
+            stats.iterative_unconverged += 1;
+        }
+        let (p, sum) = keep(answer.p, stats);
+        return (rows, p, sum);
+    }
+    // Whether the interior point is tried first: from `INTERIOR_MIN_ROWS`
+    // rows, on an island of few enough moving bodies for its Newton
+    // systems (the large ones took the large-island method above).
+    let interior_first = m >= INTERIOR_MIN_ROWS
         && task.iterative_min_rows != u32::MAX
-        && (iterative || !warm_is_close))
-        .then(|| super::interior::moving_count(&rows, v.len()))
-        .filter(|&moving| super::interior::takes(moving));
+        && (iterative || !warm_is_close);
     // The interior point's answer where it missed the conditions: where
     // the sweeps follow, they start from it (`SWEEPS_AFTER_INTERIOR`).
     let mut missed = None;
-    if let Some(moving) = interior_moving {
+    if interior_first {
         // A system at rest (a stack) meets the conditions in the warm
-        // start's subspace step, a stack's impact in a few sweeps; a
-        // large one's Newton steps cost more than its sweeps
-        // (`SWEEPS_BEFORE_LARGE_INTERIOR`).
+        // start's subspace step, a stack's impact in a few sweeps.
         if iterative {
-            let sweeps = if super::interior::is_large(moving) {
-                SWEEPS_BEFORE_LARGE_INTERIOR
-            } else {
-                ITERATIVE_CHECK_EVERY
-            };
-            let (p, met, sweeps) = sweeps_of(sweeps);
+            let (p, met, sweeps) = sweeps_of(ITERATIVE_CHECK_EVERY);
             stats.iterative_sweeps += sweeps as u64;
             if met {
                 stats.iterative_solves += 1;
@@ -973,8 +980,7 @@ fn solve_phase(
                     .filter(|&(_, met, _)| met)
                     .map(|(p, _, _)| p)
                     .or_else(|| {
-                        let untried =
-                            interior_moving.is_none() && task.iterative_min_rows != u32::MAX;
+                        let untried = !interior_first && task.iterative_min_rows != u32::MAX;
                         untried
                             .then(|| interior_rescue(&system, &warm, v.len(), stats))
                             .flatten()
@@ -1379,12 +1385,6 @@ const START_SWEEPS: usize = 128;
 /// impulses are not, so a fraction of `ITERATIVE_SWEEPS` from it ends
 /// nearer the conditions than all of them from those impulses would.
 const SWEEPS_AFTER_INTERIOR: usize = 200;
-/// Sweeps a system of more than 48 moving bodies (`interior::is_large`)
-/// takes before the interior point: a tall stack's solves meet the
-/// conditions in this many, far cheaper than the interior point's Newton
-/// steps, while a settling pile's large islands do not meet them in any
-/// affordable number, so more sweeps would only delay the interior point.
-const SWEEPS_BEFORE_LARGE_INTERIOR: usize = 16;
 /// How far (m/s) the last step's impulses may miss the conditions and
 /// still be Dantzig's start without the start sweeps. A system at rest
 /// needs nearly the same impulses every step, and its sweeps would cost a
