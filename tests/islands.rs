@@ -60,25 +60,25 @@ fn velocity_change(
 /// slightly compliant system, plus what that compliance (1e-9 of the
 /// diagonal) makes the exact system's rows close at under the stacks'
 /// loads (1e-8 m/s at the bottom of the stack of 100), which the
-/// compliant retry of Dantzig's method (`COMPLIANCE`) stays within too.
+/// compliant retry of Dantzig's method (`methods::dantzig::COMPLIANCE`) stays within too.
 const TOLERANCE: f64 = 2e-8;
 
 /// Islands solved to the LCP's conditions, with the work they took when
 /// this test was written: a pivot, sweep or Newton step count over 1.5×
 /// that fails. (name, rows, pivots, sweeps, Newton steps)
 const SOLVED: [(&str, u32, u64, u64, u64); 10] = [
-    // The interior point (`contact::interior`) on both solves.
+    // The interior point (`contact::methods::interior`) on both solves.
     ("pile_96rows", 96, 0, 0, 29),
     // The interior point on its impact; its resting phase starts from the
     // last step's impulses, close enough for Dantzig's method
-    // (`WARM_CLOSE`).
+    // (`SolverSettings::warm_close`).
     ("pile_99rows_compliant", 99, 189, 0, 14),
     // Named when Dantzig's method failed on its exact system and solved the
     // compliant one: the interior point on both solves.
     ("pile_246rows_compliant", 246, 0, 0, 34),
     // Named when the sequential impulses missed the conditions and
     // Dantzig's method took their answer; the interior point (after 8
-    // sweeps, as every system from `ITERATIVE_MIN_ROWS` rows).
+    // sweeps, as every system from `iterative_min_rows` rows).
     ("pile_354rows_iterative_then_dantzig", 354, 0, 16, 40),
     // Named when Dantzig's method failed on the exact and the compliant
     // system and the start sweeps' answer was kept 1.4e-5 m/s off: the
@@ -88,7 +88,7 @@ const SOLVED: [(&str, u32, u64, u64, u64); 10] = [
     // Dantzig's method failed on the exact and the compliant system and
     // 1000 sweeps missed too, so that the fallback's answer was kept 3.3e-2
     // and 1.1e-2 m/s off the conditions: the interior point, tried last
-    // below `INTERIOR_MIN_ROWS`, meets them.
+    // below `SolverSettings::interior_min_rows`, meets them.
     ("pile_60rows_failed_twice", 60, 211, 1000, 18),
     ("pile_30rows_failed_twice", 30, 76, 1000, 14),
     // Sequential impulses with the subspace step: the stacks by the

@@ -1,11 +1,17 @@
 //! Contact systems and their impulses and forces (SPEC 2.4): islands, the
-//! LCP rows of an island, and Dantzig's algorithm. No MPI in here.
+//! island's request and reply (`task`), the LCP rows of an island
+//! (`system`), the methods that solve them (`methods`, Dantzig's algorithm
+//! among them), the order they are tried in (`policy`, `chain`), and the
+//! checks of an answer (`guard`). No MPI in here.
 
-mod block_lu;
-mod interior;
+mod chain;
+mod guard;
 pub mod island;
-pub mod lcp;
-mod pile_sweeps;
+mod methods;
+mod policy;
+mod restitution;
 pub mod solver;
-mod subspace;
 mod system;
+mod task;
+
+pub use methods::lcp;

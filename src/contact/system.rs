@@ -1,29 +1,40 @@
 //! The contact system of an island as the solves see it: its LCP rows
 //! (`Row`: J and M⁻¹Jᵀ of one contact direction) built from the island's
-//! bodies (`IslandBody`), and the boxed LCP w = (A + c·diag) p + b that the
-//! iterative solves work on, held as its rows (`IterativeSystem`), with
-//! the impulses of a solve (`IterativeState`). The island's solve
-//! (`solver`), the subspace step (`subspace`) and the interior point
-//! (`interior`) all work on it; it depends on none of them.
+//! bodies (`IslandBody`), the rows of one phase of its solve with their
+//! targets and bounds (`PhaseSystem`), and the boxed LCP
+//! w = (A + c·diag) p + b that the iterative solves work on, held as its
+//! rows (`IterativeSystem`), with the impulses of a solve
+//! (`IterativeState`). The island's solve (`solver`) and every method
+//! (`methods`) work on it; it depends on none of them.
 
-use super::lcp;
-use crate::body::BodyId;
-use nalgebra::{Matrix3, Vector3};
-use serde::{Deserialize, Serialize};
+use super::restitution::{bounce_basis, patches_that_bounce};
+use super::task::{
+    IslandBody, IslandContact, IslandTask, LARGE_SYSTEM_ROWS, SolveStats, closing_allowed,
+};
+use crate::collision::narrowphase::CONTACT_TOLERANCE;
+use nalgebra::Vector3;
 
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct IslandBody {
-    pub id: BodyId,
-    pub inv_mass: f64,
-    /// World inverse inertia (zero for fixed and driven bodies).
-    pub inv_inertia: Matrix3<f64>,
-    pub position: Vector3<f64>,
-    pub velocity: Vector3<f64>,
-    pub angular_velocity: Vector3<f64>,
-    /// Velocity change the external forces give over the step (a·h, α·h).
-    pub external_dv: Vector3<f64>,
-    pub external_dw: Vector3<f64>,
-}
+/// Separating speeds below this (m/s) count as resting in the resting
+/// solve: a stack at rest has contact speeds of rounding size, and letting
+/// them in perturbs its redundant systems enough to send some through the
+/// compliant retry. A lifting nut rocks at about 1e-3 m/s, far above it.
+pub(super) const SEPARATING_EPS: f64 = 1e-6;
+
+/// Overlap left alone (metres): rounding, and the band time of impact allows.
+const OVERLAP_SLOP: f64 = 1e-6;
+/// Share of an overlap beyond the slop removed per step by the resting solve
+/// (Baumgarte-style stabilisation). Time of impact keeps bodies apart; this
+/// only mends what a failed solve or an accepted overlap left behind, at a
+/// separating speed of 0.2·depth/dt (2e-4 m/s for 10 µm at dt = 0.01 s).
+const OVERLAP_RECOVERY: f64 = 0.2;
+
+/// Overlap (metres) past which the resting solve asks the excess to be gone
+/// by the end of its interval (target 2·excess/h: from rest, a constant
+/// force opens the gap by h·v'/2). Each impact lets a pair 0.1 µm deeper
+/// than it was last solved (`TOI_GAP`), faster than the recovery above
+/// mends near the 10 µm tolerance. Just below it, not lower: a lower
+/// threshold lifts, and so feeds, a body wobbling on its rim.
+const OVERLAP_FIRM: f64 = 0.99 * CONTACT_TOLERANCE;
 
 /// One LCP row: direction d at contact `contact`, with M⁻¹Jᵀ precomputed.
 pub(super) struct Row {
@@ -138,6 +149,16 @@ impl Row {
         }
         s
     }
+
+    /// Adds an impulse `p` on this row to both bodies' linear and angular
+    /// impulses (`lin`, `ang`; or, with p a force, their forces and
+    /// torques).
+    pub(super) fn apply(&self, p: f64, lin: &mut [Vector3<f64>], ang: &mut [Vector3<f64>]) {
+        lin[self.a] += self.lin * p;
+        ang[self.a] += self.ang_a * p;
+        lin[self.b] -= self.lin * p;
+        ang[self.b] += self.ang_b * p;
+    }
 }
 
 /// A row on one of its bodies (`Row::side`).
@@ -157,30 +178,285 @@ impl RowSide {
     }
 }
 
-/// The storage behind `lcp::RowFactors` for a list of rows.
-pub(super) struct RowFactorsOf {
-    body: Vec<[u32; 2]>,
-    jacobian: Vec<[[f64; 6]; 2]>,
-    response: Vec<[[f64; 6]; 2]>,
+/// Which velocities a solve targets.
+#[derive(Clone, Copy)]
+pub(super) enum Phase<'a> {
+    Impact,
+    /// `start`: the velocities at the start of the step (after any impact),
+    /// before the external forces act.
+    /// `curvature`: each contact's `gap_curvature`.
+    Resting {
+        start: (&'a [Vector3<f64>], &'a [Vector3<f64>]),
+        curvature: &'a [f64],
+    },
 }
 
-impl RowFactorsOf {
-    pub(super) fn new(rows: &[Row]) -> Self {
-        RowFactorsOf {
-            body: rows.iter().map(|r| [r.a as u32, r.b as u32]).collect(),
-            jacobian: rows.iter().map(Row::jacobian).collect(),
-            response: rows.iter().map(Row::response).collect(),
+/// The boxed LCP of one phase of an island's solve, w = A p + b: per
+/// contact its normal row and, where μ > 0, two friction rows after it
+/// (`normal_rows`), with what the methods and the energy guard need
+/// beside.
+pub(super) struct PhaseSystem {
+    pub(super) rows: Vec<Row>,
+    /// A_ii, for the iterative solves and the energy guard.
+    pub(super) diag: Vec<f64>,
+    /// b: each row's velocity, with a normal row's target folded in.
+    pub(super) rhs: Vec<f64>,
+    /// Bounds; a friction row's are coefficients of its normal row's
+    /// impulse (`findex`): |p_t| ≤ μ p_N.
+    pub(super) lo: Vec<f64>,
+    pub(super) hi: Vec<f64>,
+    pub(super) findex: Vec<Option<usize>>,
+    /// Warm start of the iterative solve: last solve's impulses over this
+    /// phase's interval (resting phase only; an impact has no history).
+    pub(super) warm: Vec<f64>,
+    /// Each row's velocity-product term over the interval (`gap_curvature`):
+    /// the energy guard counts it as velocity the row already has.
+    pub(super) bias: Vec<f64>,
+    /// Each row's coefficient of restitution where the impact applies one.
+    pub(super) restitution: Vec<f64>,
+    /// The energy a deferred approach lost at its speculative contact,
+    /// which its bounce may give back (`energy_guard`): the most of any
+    /// one row's, as a patch's points carry the same approach of one
+    /// body and their sum would count it once a point.
+    pub(super) deferred: f64,
+}
+
+impl PhaseSystem {
+    /// The rows of `phase` on the velocities `v`, `w`, their targets and
+    /// bounds.
+    pub(super) fn build(
+        task: &IslandTask,
+        v: &[Vector3<f64>],
+        w: &[Vector3<f64>],
+        phase: Phase,
+    ) -> PhaseSystem {
+        // At most three rows a contact (its normal and two friction rows),
+        // reserved at once: grown a row at a time they were 2 % of the
+        // pyramid's instructions.
+        let most = 3 * task.contacts.len();
+        let mut s = PhaseSystem {
+            rows: Vec::with_capacity(most),
+            diag: Vec::new(),
+            rhs: Vec::with_capacity(most),
+            lo: Vec::with_capacity(most),
+            hi: Vec::with_capacity(most),
+            findex: Vec::with_capacity(most),
+            warm: Vec::with_capacity(most),
+            bias: Vec::with_capacity(most),
+            restitution: Vec::with_capacity(most),
+            deferred: 0.0,
+        };
+        let resting = matches!(phase, Phase::Resting { .. });
+        let normals: Vec<Row> = task
+            .contacts
+            .iter()
+            .map(|c| Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, c.normal))
+            .collect();
+        let speeds: Vec<f64> = normals.iter().map(|row| row.velocity(v, w)).collect();
+        let bounces = match phase {
+            Phase::Impact => patches_that_bounce(task, &speeds),
+            Phase::Resting { .. } => vec![false; task.contacts.len()],
+        };
+        for ((ci, c), normal) in task.contacts.iter().enumerate().zip(normals) {
+            let vn = speeds[ci];
+            let speculative = closing_allowed(c, task.dt);
+            let basis = bounce_basis(c, vn, task);
+            let b_n = normal_target(task, ci, &normal, vn, basis, bounces[ci], phase);
+            s.bias.push(match phase {
+                Phase::Resting { curvature, .. } => curvature[ci] * task.dt,
+                Phase::Impact => 0.0,
+            });
+            if matches!(phase, Phase::Impact) && basis < vn.min(0.0) {
+                let a_nn = normal.coupling(&normal);
+                if a_nn > 0.0 {
+                    s.deferred = f64::max(
+                        s.deferred,
+                        0.5 * (basis * basis - vn.min(0.0).powi(2)) / a_nn,
+                    );
+                }
+            }
+            s.restitution.push(match phase {
+                Phase::Impact if speculative > 0.0 => 0.0,
+                Phase::Impact if bounces[ci] => c.restitution,
+                _ => 0.0,
+            });
+            let ni = s.rows.len();
+            s.rows.push(normal);
+            s.rhs.push(b_n);
+            s.lo.push(0.0);
+            s.hi.push(f64::INFINITY);
+            s.findex.push(None);
+            s.warm
+                .push(if resting { c.warm_force * task.dt } else { 0.0 });
+            if c.friction > 0.0 {
+                s.push_friction_rows(task, c, ni, (v, w), resting);
+            }
+        }
+        s.diag = s.rows.iter().map(|r| r.coupling(r)).collect();
+        s
+    }
+
+    /// Contact `c`'s two friction rows, after its normal row `ni`: the slip
+    /// direction first (`friction_direction`), then the one across it.
+    fn push_friction_rows(
+        &mut self,
+        task: &IslandTask,
+        c: &IslandContact,
+        ni: usize,
+        (v, w): (&[Vector3<f64>], &[Vector3<f64>]),
+        resting: bool,
+    ) {
+        let t1 = friction_direction(task, c, v, w);
+        let t2 = c.normal.cross(&t1);
+        for t in [t1, t2] {
+            let row = Row::new(&task.bodies, c.a as usize, c.b as usize, &c.point, t);
+            self.warm.push(if resting {
+                c.warm_friction.dot(&t) * task.dt
+            } else {
+                0.0
+            });
+            self.rhs.push(row.velocity(v, w));
+            self.bias.push(0.0);
+            self.restitution.push(0.0);
+            self.rows.push(row);
+            // Friction bounds are coefficients of the normal impulse: |p_t| ≤ μ p_N.
+            self.lo.push(-c.friction);
+            self.hi.push(c.friction);
+            self.findex.push(Some(ni));
         }
     }
 
-    pub(super) fn view(&self, bodies: usize) -> lcp::RowFactors<'_> {
-        lcp::RowFactors {
-            bodies,
-            body: &self.body,
-            jacobian: &self.jacobian,
-            response: &self.response,
+    /// Counts the system in `stats`: its rows, friction rows, and size.
+    pub(super) fn count(&self, stats: &mut SolveStats) {
+        let m = self.rows.len();
+        stats.friction_rows += self.findex.iter().filter(|f| f.is_some()).count() as u32;
+        stats.rows += m as u32;
+        stats.largest_rows = stats.largest_rows.max(m as u32);
+        if m >= LARGE_SYSTEM_ROWS {
+            stats.large_systems += 1;
         }
     }
+
+    /// The system as the iterative solves see it (`IterativeSystem`).
+    pub(super) fn iterative(&self) -> IterativeSystem<'_> {
+        IterativeSystem::new(
+            &self.rows,
+            &self.diag,
+            &self.rhs,
+            &self.lo,
+            &self.hi,
+            &self.findex,
+        )
+    }
+
+    /// The sum of the normal rows' impulses in `p`.
+    pub(super) fn normal_sum(&self, p: &[f64]) -> f64 {
+        p.iter()
+            .zip(&self.findex)
+            .filter(|(_, f)| f.is_none())
+            .map(|(x, _)| x)
+            .sum()
+    }
+}
+
+/// Contact `ci`'s normal row's b in `phase`: its normal speed `vn` with
+/// what the row asks of it folded in (w = A p + b ≥ 0): restitution from
+/// the approach `basis` where the contact `bounces`, the gap a speculative
+/// contact may close, the separation a resting contact may keep, and the
+/// overlap it mends.
+fn normal_target(
+    task: &IslandTask,
+    ci: usize,
+    normal: &Row,
+    vn: f64,
+    basis: f64,
+    bounces: bool,
+    phase: Phase,
+) -> f64 {
+    let c = &task.contacts[ci];
+    let speculative = closing_allowed(c, task.dt);
+    match phase {
+        // A speculative contact: the gap may close to `SPECULATIVE_GAP`
+        // at the speed it starts with (no restitution: its approach is
+        // slower than the speculative speed, `step::contact`).
+        Phase::Impact if speculative > 0.0 => vn + speculative,
+        // Newton's law from the approach, its own or the deferred one.
+        Phase::Impact if basis < vn && bounces => vn + c.restitution * basis,
+        Phase::Impact if bounces => (1.0 + c.restitution) * vn,
+        Phase::Impact => vn,
+        // Over the step its gap changes by h (u + v')/2, u its speed
+        // after the impact phase: it may end closed to the same gap.
+        Phase::Resting { start, curvature } if speculative > 0.0 => {
+            let u = normal.velocity(start.0, start.1);
+            vn + u + 2.0 * speculative + curvature[ci] * task.dt
+        }
+        // w = v' − u ≥ 0 asks for a separating speed u that mends overlap.
+        // A contact already separating at the step's start (speed u > 0)
+        // may end it closing at up to u: over the step its gap changes
+        // by h (u + v')/2 ≥ 0, so it never ends closer than it began.
+        // Asking v' ≥ 0 instead makes the solve stop a body that is
+        // lifting off and rocking, while the constant force of the step
+        // still carries it up by h·u/2: a rocking nut gained 1.2e-5 J
+        // each time, and never came to rest.
+        Phase::Resting { start, curvature } => {
+            let u = normal.velocity(start.0, start.1);
+            let separating = if u > SEPARATING_EPS { u } else { 0.0 };
+            vn + separating + curvature[ci] * task.dt
+                - OVERLAP_RECOVERY * (-c.separation - OVERLAP_SLOP).max(0.0) / task.dt
+                - 2.0 * (-c.separation - OVERLAP_FIRM).max(0.0) / task.dt
+        }
+    }
+}
+
+/// Index of each contact's normal row in the row list `PhaseSystem::build`
+/// builds.
+pub(super) fn normal_rows(task: &IslandTask) -> Vec<usize> {
+    let mut at = 0;
+    task.contacts
+        .iter()
+        .map(|c| {
+            let here = at;
+            at += if c.friction > 0.0 { 3 } else { 1 };
+            here
+        })
+        .collect()
+}
+
+/// Slip direction at the contact, or where external forces push when at rest.
+fn friction_direction(
+    task: &IslandTask,
+    c: &IslandContact,
+    v: &[Vector3<f64>],
+    w: &[Vector3<f64>],
+) -> Vector3<f64> {
+    let n = c.normal;
+    let (a, b) = (c.a as usize, c.b as usize);
+    let (ba, bb) = (&task.bodies[a], &task.bodies[b]);
+    let rel = |va: &Vector3<f64>, wa: &Vector3<f64>, vb: &Vector3<f64>, wb: &Vector3<f64>| {
+        (va + wa.cross(&(c.point - ba.position))) - (vb + wb.cross(&(c.point - bb.position)))
+    };
+    let vel = rel(&v[a], &w[a], &v[b], &w[b]);
+    let slip = vel - n * n.dot(&vel);
+    if slip.norm() > 1e-9 {
+        return slip.normalize();
+    }
+    let push = rel(
+        &ba.external_dv,
+        &ba.external_dw,
+        &bb.external_dv,
+        &bb.external_dw,
+    );
+    let push = push - n * n.dot(&push);
+    if push.norm() > 1e-12 {
+        return push.normalize();
+    }
+    // Any tangent, chosen deterministically from the normal.
+    let helper = if n.x.abs() < 0.6 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    (helper - n * n.dot(&helper)).normalize()
 }
 
 /// How far an iterative answer may miss the LCP's conditions: each row's

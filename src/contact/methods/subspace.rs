@@ -11,7 +11,7 @@
 //! the whole load down to rounding. A is J M⁻¹ Jᵀ, so two rows couple only
 //! through a body that moves; a stack's block is banded, a pile's sparse.
 
-use super::system::{IterativeState, IterativeSystem, Row, RowSide, Step};
+use crate::contact::system::{IterativeState, IterativeSystem, Row, RowSide, Step};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
@@ -110,33 +110,7 @@ pub(super) fn free_block_step(
     if n == 0 {
         return None;
     }
-    // Each body's free rows by their position in the block, ascending
-    // (its rows are in row order, and so in block order), laid out flat:
-    // body b's are `free_of[start[b]..start[b + 1]]`.
-    let mut position = vec![usize::MAX; rows.len()];
-    for (k, &i) in free.iter().enumerate() {
-        position[i] = k;
-    }
-    let mut start = Vec::with_capacity(by_body.len() + 1);
-    let mut free_of = Vec::with_capacity(2 * n);
-    start.push(0);
-    for list in by_body {
-        free_of.extend(
-            list.iter()
-                .map(|&i| position[i])
-                .filter(|&k| k != usize::MAX),
-        );
-        start.push(free_of.len());
-    }
-    // Each body's free rows' sides on it, laid out as `free_of`.
-    let mut sides = Vec::with_capacity(free_of.len());
-    for (body, w) in start.windows(2).enumerate() {
-        sides.extend(
-            free_of[w[0]..w[1]]
-                .iter()
-                .map(|&k| rows[free[k]].side(body)),
-        );
-    }
+    let (start, free_of, sides) = free_rows_by_body(rows, by_body, free);
     // Lower triangle, one entry per coupled pair (coupling sums over both
     // shared bodies, so a pair met through two bodies is entered once),
     // gathered row by row (columns ascending). An entry is summed body by
@@ -203,6 +177,42 @@ pub(super) fn free_block_step(
     let mut step: Vec<f64> = residual.iter().map(|r| -r).collect();
     block.solve_in_place(&mut step)?;
     step.iter().all(|x| x.is_finite()).then_some(step)
+}
+
+/// Each body's free rows by their position in the block, ascending (its
+/// rows are in row order, and so in block order), laid out flat: body b's
+/// are `free_of[start[b]..start[b + 1]]`; and their sides on it, laid out
+/// as `free_of`. Returns `(start, free_of, sides)`.
+fn free_rows_by_body(
+    rows: &[Row],
+    by_body: &[Vec<usize>],
+    free: &[usize],
+) -> (Vec<usize>, Vec<usize>, Vec<RowSide>) {
+    let n = free.len();
+    let mut position = vec![usize::MAX; rows.len()];
+    for (k, &i) in free.iter().enumerate() {
+        position[i] = k;
+    }
+    let mut start = Vec::with_capacity(by_body.len() + 1);
+    let mut free_of = Vec::with_capacity(2 * n);
+    start.push(0);
+    for list in by_body {
+        free_of.extend(
+            list.iter()
+                .map(|&i| position[i])
+                .filter(|&k| k != usize::MAX),
+        );
+        start.push(free_of.len());
+    }
+    let mut sides = Vec::with_capacity(free_of.len());
+    for (body, w) in start.windows(2).enumerate() {
+        sides.extend(
+            free_of[w[0]..w[1]]
+                .iter()
+                .map(|&k| rows[free[k]].side(body)),
+        );
+    }
+    (start, free_of, sides)
 }
 
 /// The free block's upper triangle in compressed columns (rows ascending

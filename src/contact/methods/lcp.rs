@@ -393,6 +393,120 @@ pub fn solve_standard(a: &[f64], b: &[f64]) -> Result<LcpSolution, LcpError> {
     solve(&LcpProblem::standard(a, b))
 }
 
+/// The error of a solve of `n` rows whose answer still missed the
+/// conditions by `violation` after `passes` passes.
+fn unmet(n: usize, has_friction: bool, passes: usize, violation: f64, tolerance: f64) -> LcpError {
+    LcpError::Numerical {
+        size: n,
+        detail: if has_friction {
+            format!(
+                "friction bounds not consistent with the normal impulses after {passes} \
+                 passes (max violation {violation:e} > tolerance {:e}); fall back to an \
+                 iterative solver or raise LcpOptions::max_friction_passes",
+                tolerance
+            )
+        } else {
+            format!(
+                "complementarity violated by {violation:e} (tolerance {:e}) after \
+                 refining x; A may be too ill-conditioned",
+                tolerance
+            )
+        },
+    }
+}
+
+/// Checks that `p` is a problem [`LcpWorkspace::solve`] takes: sizes,
+/// finite entries, bounds around zero, friction rows that name a normal
+/// row. Returns its size n.
+fn check_input(p: &LcpProblem) -> Result<usize, LcpError> {
+    let n = p.b.len();
+    let invalid = |detail: String| LcpError::InvalidInput { size: n, detail };
+    if p.a.len() != n * n {
+        return Err(invalid(format!(
+            "A has {} entries, expected n² = {}",
+            p.a.len(),
+            n * n
+        )));
+    }
+    for (name, len) in [
+        ("lo", p.lo.len()),
+        ("hi", p.hi.len()),
+        ("findex", p.findex.len()),
+    ] {
+        if len != 0 && len != n {
+            return Err(invalid(format!(
+                "{name} has {len} entries, expected 0 or {n}"
+            )));
+        }
+    }
+    let non_finite = |what, index| LcpError::NonFinite {
+        size: n,
+        what,
+        index,
+    };
+    if let Some(i) = p.a.iter().position(|v| !v.is_finite()) {
+        return Err(non_finite("a", i));
+    }
+    if let Some(f) = p.factors {
+        if f.body.len() != n || f.jacobian.len() != n || f.response.len() != n {
+            return Err(invalid(format!("factors do not have {n} rows")));
+        }
+        if let Some(i) = f
+            .body
+            .iter()
+            .position(|b| b.iter().any(|&k| k as usize >= f.bodies))
+        {
+            return Err(invalid(format!(
+                "factors: row {i} names a body past {}",
+                f.bodies
+            )));
+        }
+        let finite = |rows: &[[[f64; 6]; 2]]| {
+            rows.iter()
+                .position(|r| r.iter().flatten().any(|v| !v.is_finite()))
+        };
+        if let Some(i) = finite(f.jacobian).or(finite(f.response)) {
+            return Err(non_finite("factors", i));
+        }
+    }
+    if let Some(i) = p.b.iter().position(|v| !v.is_finite()) {
+        return Err(non_finite("b", i));
+    }
+    if let Some(i) = p.lo.iter().position(|v| v.is_nan() || *v == f64::INFINITY) {
+        return Err(non_finite("lo", i));
+    }
+    if let Some(i) =
+        p.hi.iter()
+            .position(|v| v.is_nan() || *v == f64::NEG_INFINITY)
+    {
+        return Err(non_finite("hi", i));
+    }
+    if let Some(i) = p.lo.iter().position(|v| *v > 0.0) {
+        return Err(invalid(format!("lo[{i}] = {} > 0", p.lo[i])));
+    }
+    if let Some(i) = p.hi.iter().position(|v| *v < 0.0) {
+        return Err(invalid(format!("hi[{i}] = {} < 0", p.hi[i])));
+    }
+    for (i, f) in p.findex.iter().enumerate() {
+        if let Some(j) = *f {
+            if j >= n || j == i || p.findex[j].is_some() {
+                return Err(invalid(format!(
+                    "findex[{i}] = {j}: must name another, non-friction row"
+                )));
+            }
+            let lo = p.lo.get(i).copied().unwrap_or(0.0);
+            let hi = p.hi.get(i).copied().unwrap_or(f64::INFINITY);
+            if !(lo.is_finite() && hi.is_finite()) {
+                return Err(invalid(format!(
+                    "friction row {i} needs finite coefficients (lo = −mu, hi = mu), got \
+                     [{lo}, {hi}]"
+                )));
+            }
+        }
+    }
+    Ok(n)
+}
+
 /// Entries below `NOISE` × their scale are rounding, not directions.
 const NOISE: f64 = 1e-13;
 /// Pivots below `PIVOT_FLOOR` · max A_ii are raised to it (see the module docs).
@@ -941,126 +1055,38 @@ impl LcpWorkspace {
             // can jump between equivalent distributions from pass to pass, and
             // the average stops that two-cycle (on 3000 random box stacks with
             // friction, failures fell from 3 % to 0.1 %).
-            if pass >= 1 {
-                for i in 0..n {
-                    if problem.findex.get(i).is_some_and(Option::is_some) {
-                        self.lo[i] = 0.5 * (self.lo[i] + self.prev_lo[i]);
-                        self.hi[i] = 0.5 * (self.hi[i] + self.prev_hi[i]);
-                    }
+            self.next_bounds(problem, pass);
+        }
+        Err(unmet(n, has_friction, passes, violation, options.tolerance))
+    }
+
+    /// The friction bounds of the pass after `pass`, from those `finish`
+    /// left (averaged with the previous pass's from the third pass on).
+    fn next_bounds(&mut self, problem: &LcpProblem, pass: usize) {
+        let n = self.n;
+        if pass >= 1 {
+            for i in 0..n {
+                if problem.findex.get(i).is_some_and(Option::is_some) {
+                    self.lo[i] = 0.5 * (self.lo[i] + self.prev_lo[i]);
+                    self.hi[i] = 0.5 * (self.hi[i] + self.prev_hi[i]);
                 }
             }
-            self.prev_lo.clear();
-            self.prev_lo.extend_from_slice(&self.lo[..n]);
-            self.prev_hi.clear();
-            self.prev_hi.extend_from_slice(&self.hi[..n]);
         }
-        Err(LcpError::Numerical {
-            size: n,
-            detail: if has_friction {
-                format!(
-                    "friction bounds not consistent with the normal impulses after {passes} \
-                     passes (max violation {violation:e} > tolerance {:e}); fall back to an \
-                     iterative solver or raise LcpOptions::max_friction_passes",
-                    options.tolerance
-                )
-            } else {
-                format!(
-                    "complementarity violated by {violation:e} (tolerance {:e}) after \
-                     refining x; A may be too ill-conditioned",
-                    options.tolerance
-                )
-            },
-        })
+        self.prev_lo.clear();
+        self.prev_lo.extend_from_slice(&self.lo[..n]);
+        self.prev_hi.clear();
+        self.prev_hi.extend_from_slice(&self.hi[..n]);
     }
 
     /// Checks the input and sizes the buffers. Returns n.
     fn prepare(&mut self, p: &LcpProblem, opts: &LcpOptions) -> Result<usize, LcpError> {
-        let n = p.b.len();
-        let invalid = |detail: String| LcpError::InvalidInput { size: n, detail };
-        if p.a.len() != n * n {
-            return Err(invalid(format!(
-                "A has {} entries, expected n² = {}",
-                p.a.len(),
-                n * n
-            )));
-        }
-        for (name, len) in [
-            ("lo", p.lo.len()),
-            ("hi", p.hi.len()),
-            ("findex", p.findex.len()),
-        ] {
-            if len != 0 && len != n {
-                return Err(invalid(format!(
-                    "{name} has {len} entries, expected 0 or {n}"
-                )));
-            }
-        }
-        let non_finite = |what, index| LcpError::NonFinite {
-            size: n,
-            what,
-            index,
-        };
-        if let Some(i) = p.a.iter().position(|v| !v.is_finite()) {
-            return Err(non_finite("a", i));
-        }
-        if let Some(f) = p.factors {
-            if f.body.len() != n || f.jacobian.len() != n || f.response.len() != n {
-                return Err(invalid(format!("factors do not have {n} rows")));
-            }
-            if let Some(i) = f
-                .body
-                .iter()
-                .position(|b| b.iter().any(|&k| k as usize >= f.bodies))
-            {
-                return Err(invalid(format!(
-                    "factors: row {i} names a body past {}",
-                    f.bodies
-                )));
-            }
-            let finite = |rows: &[[[f64; 6]; 2]]| {
-                rows.iter()
-                    .position(|r| r.iter().flatten().any(|v| !v.is_finite()))
-            };
-            if let Some(i) = finite(f.jacobian).or(finite(f.response)) {
-                return Err(non_finite("factors", i));
-            }
-        }
-        if let Some(i) = p.b.iter().position(|v| !v.is_finite()) {
-            return Err(non_finite("b", i));
-        }
-        if let Some(i) = p.lo.iter().position(|v| v.is_nan() || *v == f64::INFINITY) {
-            return Err(non_finite("lo", i));
-        }
-        if let Some(i) =
-            p.hi.iter()
-                .position(|v| v.is_nan() || *v == f64::NEG_INFINITY)
-        {
-            return Err(non_finite("hi", i));
-        }
-        if let Some(i) = p.lo.iter().position(|v| *v > 0.0) {
-            return Err(invalid(format!("lo[{i}] = {} > 0", p.lo[i])));
-        }
-        if let Some(i) = p.hi.iter().position(|v| *v < 0.0) {
-            return Err(invalid(format!("hi[{i}] = {} < 0", p.hi[i])));
-        }
-        for (i, f) in p.findex.iter().enumerate() {
-            if let Some(j) = *f {
-                if j >= n || j == i || p.findex[j].is_some() {
-                    return Err(invalid(format!(
-                        "findex[{i}] = {j}: must name another, non-friction row"
-                    )));
-                }
-                let lo = p.lo.get(i).copied().unwrap_or(0.0);
-                let hi = p.hi.get(i).copied().unwrap_or(f64::INFINITY);
-                if !(lo.is_finite() && hi.is_finite()) {
-                    return Err(invalid(format!(
-                        "friction row {i} needs finite coefficients (lo = −mu, hi = mu), got \
-                         [{lo}, {hi}]"
-                    )));
-                }
-            }
-        }
+        let n = check_input(p)?;
+        self.reset(p, opts, n);
+        Ok(n)
+    }
 
+    /// Sizes the buffers for problem `p` of `n` rows and sets its scales.
+    fn reset(&mut self, p: &LcpProblem, opts: &LcpOptions, n: usize) {
         self.n = n;
         self.x.clear();
         self.x.resize(n, 0.0);
@@ -1117,7 +1143,6 @@ impl LcpWorkspace {
                 amax.max(1.0)
             };
         self.pivot_limit = opts.max_pivots.unwrap_or(50 * n + 100);
-        Ok(n)
     }
 
     /// One Dantzig pass over all rows. `lazy_friction`: set each friction row's
@@ -1352,28 +1377,7 @@ impl LcpWorkspace {
             let (s, event) = self.ratio_test(d, dir, schur, independent);
 
             if let Event::None = event {
-                // An unbounded ray: w_d never reaches 0 along it.
-                // A dependent row left with |w_d| within a tenth of the
-                // tolerance stays where it is (1e12-conditioned blocks leave
-                // Δa_d ≈ 1e-12 A_dd and w_d ≈ 1e-12 σ_d there); the final check
-                // counts it like any other row.
-                let (wd, sd) = self.fresh_w(ctx, d);
-                self.w[d] = wd;
-                if wd.abs() <= RAY_FRACTION * ctx.opts.tolerance * sd {
-                    self.state[d] = if self.x[d] == self.lo[d] {
-                        RowState::AtLo
-                    } else if self.x[d] == self.hi[d] {
-                        RowState::AtHi
-                    } else {
-                        RowState::Free
-                    };
-                    return Ok(());
-                }
-                // No fallback to driving a dependent row with its tiny Δa_d:
-                // Δa_d below the threshold is rounding (seen at 1e-12 · A_dd on
-                // rank-deficient Gram matrices), and dividing by it gives
-                // impulses of 1e13 that only look like a solution.
-                return Err(LcpError::Infeasible { size: n, row: d });
+                return self.end_on_ray(ctx, d);
             }
             if !s.is_finite() {
                 return Err(LcpError::Numerical {
@@ -1383,19 +1387,7 @@ impl LcpWorkspace {
             }
 
             if s > 0.0 {
-                for (r, &k) in self.clamped.iter().enumerate() {
-                    self.x[k] += s * self.dxc[r];
-                }
-                self.x[d] += s * dir;
-                for k in 0..n {
-                    if matches!(
-                        self.state[k],
-                        RowState::AtLo | RowState::AtHi | RowState::Free
-                    ) {
-                        self.w[k] += s * self.dw[k];
-                    }
-                }
-                self.w[d] += s * dir * schur;
+                self.step(d, dir, s, schur);
             }
 
             match event {
@@ -1431,6 +1423,52 @@ impl LcpWorkspace {
                 }
             }
         }
+    }
+
+    /// Driving row d along an unbounded ray: w_d never reaches 0 along it.
+    /// A dependent row left with |w_d| within a tenth of the tolerance
+    /// stays where it is (1e12-conditioned blocks leave Δa_d ≈ 1e-12 A_dd
+    /// and w_d ≈ 1e-12 σ_d there); the final check counts it like any
+    /// other row.
+    fn end_on_ray(&mut self, ctx: Ctx, d: usize) -> Result<(), LcpError> {
+        let (wd, sd) = self.fresh_w(ctx, d);
+        self.w[d] = wd;
+        if wd.abs() <= RAY_FRACTION * ctx.opts.tolerance * sd {
+            self.state[d] = if self.x[d] == self.lo[d] {
+                RowState::AtLo
+            } else if self.x[d] == self.hi[d] {
+                RowState::AtHi
+            } else {
+                RowState::Free
+            };
+            return Ok(());
+        }
+        // No fallback to driving a dependent row with its tiny Δa_d:
+        // Δa_d below the threshold is rounding (seen at 1e-12 · A_dd on
+        // rank-deficient Gram matrices), and dividing by it gives
+        // impulses of 1e13 that only look like a solution.
+        Err(LcpError::Infeasible {
+            size: self.n,
+            row: d,
+        })
+    }
+
+    /// A step of length `s` in direction `dir` of driven row d: x_d and
+    /// x_C move, and the w of the rows not clamped (Δw_C = 0).
+    fn step(&mut self, d: usize, dir: f64, s: f64, schur: f64) {
+        for (r, &k) in self.clamped.iter().enumerate() {
+            self.x[k] += s * self.dxc[r];
+        }
+        self.x[d] += s * dir;
+        for k in 0..self.n {
+            if matches!(
+                self.state[k],
+                RowState::AtLo | RowState::AtHi | RowState::Free
+            ) {
+                self.w[k] += s * self.dw[k];
+            }
+        }
+        self.w[d] += s * dir * schur;
     }
 
     /// The largest step keeping every condition, and the row that limits it.

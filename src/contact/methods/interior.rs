@@ -24,7 +24,7 @@
 
 use super::block_lu::{BlockLu, BlockMatrix, BlockPattern};
 use super::subspace;
-use super::system::{IterativeState, IterativeSystem, Row, Step};
+use crate::contact::system::{IterativeState, IterativeSystem, Row, Step};
 use faer::Mat;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use nalgebra::Vector3;
@@ -39,7 +39,7 @@ const MAX_BODIES: usize = 1000;
 /// Moving bodies at most for which a Newton system whose block solve is
 /// refused is factored densely (with pivoting); beyond, such a system ends
 /// the solve (a dense LU of 500 unknowns costs 10⁸ flops a step).
-const DENSE_BODIES: usize = 48;
+pub(crate) const DENSE_BODIES: usize = 48;
 /// Added to the Newton matrix's diagonal, times A_ii, and nowhere else:
 /// it damps the steps along what the rows leave undetermined (the friction
 /// of redundant corners, free between its bounds with w ≈ 0, swung from
@@ -76,7 +76,7 @@ enum Kind {
 }
 
 /// What the interior solve came to.
-pub(super) struct InteriorAnswer {
+pub(crate) struct InteriorAnswer {
     pub p: Vec<f64>,
     pub met: bool,
     pub steps: u32,
@@ -84,14 +84,92 @@ pub(super) struct InteriorAnswer {
 
 /// Solves the system from `warm` (the last solve's impulses, or zero).
 /// `None` where a Newton system could not be factored.
-pub(super) fn solve(
+pub(crate) fn solve(
     system: &IterativeSystem,
     warm: &[f64],
     bodies: usize,
 ) -> Option<InteriorAnswer> {
     let rows = system.rows;
     let m = rows.len();
-    let kind: Vec<Kind> = (0..m)
+    let kind = kinds(system);
+    let (slot, moving) = moving_bodies(rows, bodies);
+    if !takes(moving) {
+        return None;
+    }
+    let pattern = BlockPattern::new(
+        moving,
+        rows.iter()
+            .filter(|r| slot[r.a] != usize::MAX && slot[r.b] != usize::MAX)
+            .map(|r| (slot[r.a], slot[r.b])),
+    );
+    let bmax = system
+        .b
+        .iter()
+        .fold(0.0f64, |s, x| s.max(x.abs()))
+        .max(1e-12);
+    let mut it = Iterate::start(system, &kind, warm, bmax, bodies);
+    let pairs = kind.iter().fold(0usize, |c, k| match k {
+        Kind::Dead => c,
+        Kind::Normal => c + 1,
+        Kind::Friction { .. } => c + 2,
+    });
+    if pairs == 0 {
+        return None;
+    }
+    let newton = Newton {
+        system,
+        kind: &kind,
+        slot: &slot,
+        pattern: &pattern,
+        unknowns: 6 * moving,
+        bodies,
+    };
+
+    let mut steps = 0;
+    let mut attempts = 0;
+    let mut stalled = 0;
+    let mut da = vec![0.0; m];
+    let mut dc = vec![0.0; m];
+    while steps < MAX_STEPS {
+        steps += 1;
+        let w: Vec<f64> = (0..m).map(|i| system.velocity(i, &it.state)).collect();
+        let gaps = Gaps::of(&kind, &it.p);
+        let mu = complementarity(&kind, &it.p, &gaps, &it.s, &it.z, &it.y) / pairs as f64;
+        // Close enough to read the sets off: try the exact finish.
+        let close = mu < 1e-3 * system.tolerance * bmax / max_diag(system);
+        if close {
+            attempts += 1;
+        }
+        // Far from the answer after this many steps: stalled (see below).
+        let hopeless = !close && steps >= FAR_STEPS;
+        if close || steps == MAX_STEPS || hopeless {
+            let last = steps == MAX_STEPS || attempts == FINISH_ATTEMPTS || hopeless;
+            let answer = finish(system, &it.p, bodies, last, attempts >= POLISH_FROM);
+            if answer.met || last {
+                return Some(InteriorAnswer {
+                    steps: steps as u32,
+                    ..answer
+                });
+            }
+        }
+        let (d, alpha) = newton.step(&it, &w, &gaps, (mu, pairs), (&mut da, &mut dc))?;
+        // Stalled near the answer (the friction bounds move with the
+        // normal impulses, so the problem is not monotone and the centring
+        // can fail): hand over.
+        if attempts > 0 && alpha < 0.1 {
+            stalled += 1;
+            if stalled >= 3 {
+                attempts = FINISH_ATTEMPTS - 1;
+            }
+        }
+        it.advance(alpha, &d, system, bodies);
+    }
+    None
+}
+
+/// Each row's part in the complementarity.
+fn kinds(system: &IterativeSystem) -> Vec<Kind> {
+    (0..system.rows.len())
         .map(|i| {
             if system.diag[i] <= 1e-300 {
                 Kind::Dead
@@ -107,94 +185,115 @@ pub(super) fn solve(
                 }
             }
         })
-        .collect();
-    let (slot, moving) = moving_bodies(rows, bodies);
-    if !takes(moving) {
-        return None;
-    }
-    let n = 6 * moving;
-    let pattern = BlockPattern::new(
-        moving,
-        rows.iter()
-            .filter(|r| slot[r.a] != usize::MAX && slot[r.b] != usize::MAX)
-            .map(|r| (slot[r.a], slot[r.b])),
-    );
-    let bmax = system
-        .b
-        .iter()
-        .fold(0.0f64, |s, x| s.max(x.abs()))
-        .max(1e-12);
+        .collect()
+}
 
-    // Start: the warm impulses pushed inside the bounds.
-    let mut p = vec![0.0; m];
-    for i in 0..m {
-        match kind[i] {
-            Kind::Dead => {}
-            Kind::Normal => p[i] = warm[i].max(0.1 * bmax / system.diag[i]),
-            Kind::Friction { .. } => {}
-        }
-    }
-    for i in 0..m {
-        if let Kind::Friction { normal, lo, hi } = kind[i] {
-            let (l, h) = (lo * p[normal], hi * p[normal]);
-            let mid = 0.5 * (l + h);
-            p[i] = warm[i].clamp(mid + 0.5 * (l - mid), mid + 0.5 * (h - mid));
-        }
-    }
-    let mut state = state_of(system, &p, bodies);
-    let w0: Vec<f64> = (0..m).map(|i| system.velocity(i, &state)).collect();
-    // Dual variables: s for a normal row (its w), z and y for a friction
-    // row's lower and upper bound (w = z − y).
-    let floor = 0.1 * bmax;
-    let mut s = vec![0.0; m];
-    let mut z = vec![0.0; m];
-    let mut y = vec![0.0; m];
-    for i in 0..m {
-        match kind[i] {
-            Kind::Dead => {}
-            Kind::Normal => s[i] = w0[i].max(0.0) + floor,
-            Kind::Friction { .. } => {
-                z[i] = w0[i].max(0.0) + floor;
-                y[i] = (-w0[i]).max(0.0) + floor;
+/// The primal–dual iterate: the impulses p (and the velocity changes
+/// they give, `state`), and the dual variables: s for a normal row (its
+/// w), z and y for a friction row's lower and upper bound (w = z − y).
+struct Iterate {
+    p: Vec<f64>,
+    s: Vec<f64>,
+    z: Vec<f64>,
+    y: Vec<f64>,
+    state: IterativeState,
+}
+
+/// A Newton direction of every part of the iterate.
+struct Direction {
+    dp: Vec<f64>,
+    ds: Vec<f64>,
+    dz: Vec<f64>,
+    dy: Vec<f64>,
+}
+
+impl Iterate {
+    /// The start: the warm impulses pushed inside the bounds, each dual
+    /// variable at least a tenth of the largest |b|.
+    fn start(
+        system: &IterativeSystem,
+        kind: &[Kind],
+        warm: &[f64],
+        bmax: f64,
+        bodies: usize,
+    ) -> Iterate {
+        let m = kind.len();
+        let mut p = vec![0.0; m];
+        for i in 0..m {
+            match kind[i] {
+                Kind::Dead => {}
+                Kind::Normal => p[i] = warm[i].max(0.1 * bmax / system.diag[i]),
+                Kind::Friction { .. } => {}
             }
         }
-    }
-    let pairs = kind.iter().fold(0usize, |c, k| match k {
-        Kind::Dead => c,
-        Kind::Normal => c + 1,
-        Kind::Friction { .. } => c + 2,
-    });
-    if pairs == 0 {
-        return None;
-    }
-
-    let mut steps = 0;
-    let mut attempts = 0;
-    let mut stalled = 0;
-    let mut da = vec![0.0; m];
-    let mut dc = vec![0.0; m];
-    while steps < MAX_STEPS {
-        steps += 1;
-        let w: Vec<f64> = (0..m).map(|i| system.velocity(i, &state)).collect();
-        let gaps = Gaps::of(&kind, &p);
-        let mu = complementarity(&kind, &p, &gaps, &s, &z, &y) / pairs as f64;
-        // Close enough to read the sets off: try the exact finish.
-        let close = mu < 1e-3 * system.tolerance * bmax / max_diag(system);
-        if close {
-            attempts += 1;
-        }
-        // Far from the answer after this many steps: stalled (see below).
-        let hopeless = !close && steps >= FAR_STEPS;
-        if close || steps == MAX_STEPS || hopeless {
-            let last = steps == MAX_STEPS || attempts == FINISH_ATTEMPTS || hopeless;
-            let answer = finish(system, &p, bodies, last, attempts >= POLISH_FROM);
-            if answer.met || last {
-                return Some(InteriorAnswer {
-                    steps: steps as u32,
-                    ..answer
-                });
+        for i in 0..m {
+            if let Kind::Friction { normal, lo, hi } = kind[i] {
+                let (l, h) = (lo * p[normal], hi * p[normal]);
+                let mid = 0.5 * (l + h);
+                p[i] = warm[i].clamp(mid + 0.5 * (l - mid), mid + 0.5 * (h - mid));
             }
         }
+        let state = state_of(system, &p, bodies);
+        let w0: Vec<f64> = (0..m).map(|i| system.velocity(i, &state)).collect();
+        let floor = 0.1 * bmax;
+        let mut s = vec![0.0; m];
+        let mut z = vec![0.0; m];
+        let mut y = vec![0.0; m];
+        for i in 0..m {
+            match kind[i] {
+                Kind::Dead => {}
+                Kind::Normal => s[i] = w0[i].max(0.0) + floor,
+                Kind::Friction { .. } => {
+                    z[i] = w0[i].max(0.0) + floor;
+                    y[i] = (-w0[i]).max(0.0) + floor;
+                }
+            }
+        }
+        Iterate { p, s, z, y, state }
+    }
+
+    /// A step `alpha` along `d`.
+    fn advance(&mut self, alpha: f64, d: &Direction, system: &IterativeSystem, bodies: usize) {
+        for i in 0..self.p.len() {
+            self.p[i] += alpha * d.dp[i];
+            self.s[i] += alpha * d.ds[i];
+            self.z[i] += alpha * d.dz[i];
+            self.y[i] += alpha * d.dy[i];
+        }
+        self.state = state_of(system, &self.p, bodies);
+    }
+}
+
+/// What the Newton steps of one solve share: the system, its rows' kinds,
+/// the moving bodies' slots in the velocity system (`usize::MAX` for the
+/// others) and that system's block pattern.
+struct Newton<'a> {
+    system: &'a IterativeSystem<'a>,
+    kind: &'a [Kind],
+    slot: &'a [usize],
+    pattern: &'a BlockPattern,
+    /// Six a moving body.
+    unknowns: usize,
+    bodies: usize,
+}
+
+impl Newton<'_> {
+    /// Mehrotra's predictor–corrector direction from `it` (`w` its rows'
+    /// velocities, `mu` its mean complementarity over `pairs`) and the
+    /// step along it; `None` where a Newton system could not be factored
+    /// or the step is not finite. `da`, `dc`: each friction row's change
+    /// of its gaps to its bounds, scratch.
+    fn step(
+        &self,
+        it: &Iterate,
+        w: &[f64],
+        gaps: &Gaps,
+        (mu, pairs): (f64, usize),
+        (da, dc): (&mut [f64], &mut [f64]),
+    ) -> Option<(Direction, f64)> {
+        let kind = self.kind;
+        let m = kind.len();
+        let (p, s, z, y) = (&it.p[..], &it.s[..], &it.z[..], &it.y[..]);
         // Residuals of w's equations.
         let rw: Vec<f64> = (0..m)
             .map(|i| match kind[i] {
@@ -203,53 +302,10 @@ pub(super) fn solve(
                 Kind::Friction { .. } => w[i] - z[i] + y[i],
             })
             .collect();
-        // G, per row: its diagonal g and its coupling e to its normal row.
-        let mut g = vec![1.0; m];
-        let mut e = vec![0.0; m];
-        for i in 0..m {
-            let c = (system.compliance + DAMPING) * system.diag[i];
-            match kind[i] {
-                Kind::Dead => {}
-                Kind::Normal => g[i] = c + s[i] / p[i],
-                Kind::Friction { lo, hi, .. } => {
-                    g[i] = c + z[i] / gaps.lo[i] + y[i] / gaps.hi[i];
-                    e[i] = -lo * z[i] / gaps.lo[i] - hi * y[i] / gaps.hi[i];
-                }
-            }
-        }
-        let k = newton_matrix(&pattern, rows, &kind, &slot, &g, &e);
+        let (g, e) = self.weights(it, gaps);
+        let k = newton_matrix(self.pattern, self.system.rows, kind, self.slot, &g, &e);
         let mut factor = Factor::of(&k)?;
-        let mut solve_for = |r: &[f64]| -> Option<Vec<f64>> {
-            // t = G⁻¹ r
-            let t = ginv(&kind, &g, &e, r);
-            let mut rhs = vec![0.0; n];
-            for (i, row) in rows.iter().enumerate() {
-                if t[i] == 0.0 {
-                    continue;
-                }
-                let resp = row.response();
-                for (side, body) in [(0, row.a), (1, row.b)] {
-                    if slot[body] == usize::MAX {
-                        continue;
-                    }
-                    for c in 0..6 {
-                        rhs[6 * slot[body] + c] += t[i] * resp[side][c];
-                    }
-                }
-            }
-            let du = factor.solve(&k, &rhs)?;
-            let mut dv = vec![Vector3::zeros(); bodies];
-            let mut dw = vec![Vector3::zeros(); bodies];
-            for b in 0..bodies {
-                if slot[b] != usize::MAX {
-                    let o = 6 * slot[b];
-                    dv[b] = Vector3::new(du[o], du[o + 1], du[o + 2]);
-                    dw[b] = Vector3::new(du[o + 3], du[o + 4], du[o + 5]);
-                }
-            }
-            let r2: Vec<f64> = (0..m).map(|i| r[i] - rows[i].velocity(&dv, &dw)).collect();
-            Some(ginv(&kind, &g, &e, &r2))
-        };
+        let mut solve_for = |r: &[f64]| self.solve_for(&k, &mut factor, (&g, &e), r);
         // Predictor (σ = 0), then Mehrotra's corrector.
         let rhs_of = |target: &dyn Fn(usize, u8) -> f64| -> Vec<f64> {
             (0..m)
@@ -268,62 +324,29 @@ pub(super) fn solve(
             _ => -gaps.hi[i] * y[i],
         };
         let dp_aff = solve_for(&rhs_of(&affine_target))?;
-        let dual =
-            |dp: &[f64], target: &dyn Fn(usize, u8) -> f64, da: &mut [f64], dc: &mut [f64]| {
-                let mut ds = vec![0.0; m];
-                let mut dz = vec![0.0; m];
-                let mut dy = vec![0.0; m];
-                for i in 0..m {
-                    match kind[i] {
-                        Kind::Dead => {}
-                        Kind::Normal => ds[i] = (target(i, 0) - s[i] * dp[i]) / p[i],
-                        Kind::Friction { normal, lo, hi } => {
-                            da[i] = dp[i] - lo * dp[normal];
-                            dc[i] = hi * dp[normal] - dp[i];
-                            dz[i] = (target(i, 1) - z[i] * da[i]) / gaps.lo[i];
-                            dy[i] = (target(i, 2) - y[i] * dc[i]) / gaps.hi[i];
-                        }
-                    }
-                }
-                (ds, dz, dy)
-            };
-        let (ds_aff, dz_aff, dy_aff) = dual(&dp_aff, &affine_target, &mut da, &mut dc);
+        let (ds_aff, dz_aff, dy_aff) = dual(kind, it, gaps, &dp_aff, &affine_target, (da, dc));
         let alpha_aff = step_length(
-            &kind,
-            (&p, &gaps, &s, &z, &y),
-            (&dp_aff, &da, &dc, &ds_aff, &dz_aff, &dy_aff),
+            kind,
+            (p, gaps, s, z, y),
+            (&dp_aff, da, dc, &ds_aff, &dz_aff, &dy_aff),
         );
-        let mu_aff = {
-            let mut sum = 0.0;
-            for i in 0..m {
-                match kind[i] {
-                    Kind::Dead => {}
-                    Kind::Normal => {
-                        sum += (p[i] + alpha_aff * dp_aff[i]) * (s[i] + alpha_aff * ds_aff[i])
-                    }
-                    Kind::Friction { .. } => {
-                        sum += (gaps.lo[i] + alpha_aff * da[i]) * (z[i] + alpha_aff * dz_aff[i])
-                            + (gaps.hi[i] + alpha_aff * dc[i]) * (y[i] + alpha_aff * dy_aff[i])
-                    }
-                }
-            }
-            sum / pairs as f64
-        };
+        let mu_aff = complementarity_along(
+            kind,
+            (p, gaps, s, z, y),
+            alpha_aff,
+            (&dp_aff, da, dc, &ds_aff, &dz_aff, &dy_aff),
+        ) / pairs as f64;
         let sigma = (mu_aff / mu).powi(3).min(1.0);
-        let (da_aff, dc_aff) = (da.clone(), dc.clone());
+        let (da_aff, dc_aff) = (da.to_vec(), dc.to_vec());
         let corrected = |i: usize, which: u8| match which {
             0 => sigma * mu - p[i] * s[i] - dp_aff[i] * ds_aff[i],
             1 => sigma * mu - gaps.lo[i] * z[i] - da_aff[i] * dz_aff[i],
             _ => sigma * mu - gaps.hi[i] * y[i] - dc_aff[i] * dy_aff[i],
         };
         let dp = solve_for(&rhs_of(&corrected))?;
-        let (ds, dz, dy) = dual(&dp, &corrected, &mut da, &mut dc);
+        let (ds, dz, dy) = dual(kind, it, gaps, &dp, &corrected, (da, dc));
         let alpha = (TO_BOUND
-            * step_length(
-                &kind,
-                (&p, &gaps, &s, &z, &y),
-                (&dp, &da, &dc, &ds, &dz, &dy),
-            ))
+            * step_length(kind, (p, gaps, s, z, y), (&dp, da, dc, &ds, &dz, &dy)))
         .min(1.0);
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
         if !alpha.is_finite()
@@ -335,24 +358,125 @@ pub(super) fn solve(
         {
             return None;
         }
-        // Stalled near the answer (the friction bounds move with the
-        // normal impulses, so the problem is not monotone and the centring
-        // can fail): hand over.
-        if attempts > 0 && alpha < 0.1 {
-            stalled += 1;
-            if stalled >= 3 {
-                attempts = FINISH_ATTEMPTS - 1;
+        Some((Direction { dp, ds, dz, dy }, alpha))
+    }
+
+    /// G, per row: its diagonal g and its coupling e to its normal row.
+    fn weights(&self, it: &Iterate, gaps: &Gaps) -> (Vec<f64>, Vec<f64>) {
+        let system = self.system;
+        let m = self.kind.len();
+        let (p, s, z, y) = (&it.p, &it.s, &it.z, &it.y);
+        let mut g = vec![1.0; m];
+        let mut e = vec![0.0; m];
+        for i in 0..m {
+            let c = (system.compliance + DAMPING) * system.diag[i];
+            match self.kind[i] {
+                Kind::Dead => {}
+                Kind::Normal => g[i] = c + s[i] / p[i],
+                Kind::Friction { lo, hi, .. } => {
+                    g[i] = c + z[i] / gaps.lo[i] + y[i] / gaps.hi[i];
+                    e[i] = -lo * z[i] / gaps.lo[i] - hi * y[i] / gaps.hi[i];
+                }
             }
         }
-        for i in 0..m {
-            p[i] += alpha * dp[i];
-            s[i] += alpha * ds[i];
-            z[i] += alpha * dz[i];
-            y[i] += alpha * dy[i];
-        }
-        state = state_of(system, &p, bodies);
+        (g, e)
     }
-    None
+
+    /// Δp with (A + G) Δp = r, by Woodbury: t = G⁻¹ r, the velocity system
+    /// K Δu = M⁻¹ Jᵀ t, then Δp = G⁻¹ (r − J Δu).
+    fn solve_for<'m>(
+        &self,
+        k: &'m BlockMatrix,
+        factor: &mut Factor<'m>,
+        (g, e): (&[f64], &[f64]),
+        r: &[f64],
+    ) -> Option<Vec<f64>> {
+        let (kind, slot, rows) = (self.kind, self.slot, self.system.rows);
+        let m = kind.len();
+        // t = G⁻¹ r
+        let t = ginv(kind, g, e, r);
+        let mut rhs = vec![0.0; self.unknowns];
+        for (i, row) in rows.iter().enumerate() {
+            if t[i] == 0.0 {
+                continue;
+            }
+            let resp = row.response();
+            for (side, body) in [(0, row.a), (1, row.b)] {
+                if slot[body] == usize::MAX {
+                    continue;
+                }
+                for c in 0..6 {
+                    rhs[6 * slot[body] + c] += t[i] * resp[side][c];
+                }
+            }
+        }
+        let du = factor.solve(k, &rhs)?;
+        let mut dv = vec![Vector3::zeros(); self.bodies];
+        let mut dw = vec![Vector3::zeros(); self.bodies];
+        for b in 0..self.bodies {
+            if slot[b] != usize::MAX {
+                let o = 6 * slot[b];
+                dv[b] = Vector3::new(du[o], du[o + 1], du[o + 2]);
+                dw[b] = Vector3::new(du[o + 3], du[o + 4], du[o + 5]);
+            }
+        }
+        let r2: Vec<f64> = (0..m).map(|i| r[i] - rows[i].velocity(&dv, &dw)).collect();
+        Some(ginv(kind, g, e, &r2))
+    }
+}
+
+/// The dual variables' direction that goes with `dp` towards `target`
+/// (which: 0 a normal row's, 1 and 2 a friction row's lower and upper
+/// bound's complementarity), with each friction row's gap changes written
+/// into `da`, `dc`.
+fn dual(
+    kind: &[Kind],
+    it: &Iterate,
+    gaps: &Gaps,
+    dp: &[f64],
+    target: &dyn Fn(usize, u8) -> f64,
+    (da, dc): (&mut [f64], &mut [f64]),
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let m = kind.len();
+    let (p, s, z, y) = (&it.p, &it.s, &it.z, &it.y);
+    let mut ds = vec![0.0; m];
+    let mut dz = vec![0.0; m];
+    let mut dy = vec![0.0; m];
+    for i in 0..m {
+        match kind[i] {
+            Kind::Dead => {}
+            Kind::Normal => ds[i] = (target(i, 0) - s[i] * dp[i]) / p[i],
+            Kind::Friction { normal, lo, hi } => {
+                da[i] = dp[i] - lo * dp[normal];
+                dc[i] = hi * dp[normal] - dp[i];
+                dz[i] = (target(i, 1) - z[i] * da[i]) / gaps.lo[i];
+                dy[i] = (target(i, 2) - y[i] * dc[i]) / gaps.hi[i];
+            }
+        }
+    }
+    (ds, dz, dy)
+}
+
+/// The complementarity's sum after a step `alpha` along a direction.
+#[allow(clippy::type_complexity)]
+fn complementarity_along(
+    kind: &[Kind],
+    (p, gaps, s, z, y): (&[f64], &Gaps, &[f64], &[f64], &[f64]),
+    alpha: f64,
+    (dp, da, dc, ds, dz, dy): (&[f64], &[f64], &[f64], &[f64], &[f64], &[f64]),
+) -> f64 {
+    let mut sum = 0.0;
+    for i in 0..p.len() {
+        match kind[i] {
+            Kind::Dead => {}
+            Kind::Normal => sum += (p[i] + alpha * dp[i]) * (s[i] + alpha * ds[i]),
+            Kind::Friction { .. } => {
+                sum += (gaps.lo[i] + alpha * da[i]) * (z[i] + alpha * dz[i])
+                    + (gaps.hi[i] + alpha * dc[i]) * (y[i] + alpha * dy[i])
+            }
+        }
+    }
+    sum
 }
 
 /// The bodies the rows move, numbered for the velocity system (`usize::MAX`
@@ -373,20 +497,14 @@ fn moving_bodies(rows: &[Row], bodies: usize) -> (Vec<usize>, usize) {
 }
 
 /// How many bodies the rows move (the Newton systems' six unknowns each).
-pub(super) fn moving_count(rows: &[Row], bodies: usize) -> usize {
+pub(crate) fn moving_count(rows: &[Row], bodies: usize) -> usize {
     moving_bodies(rows, bodies).1
 }
 
 /// Whether `solve` takes a system that moves this many bodies
 /// (`MAX_BODIES`).
-pub(super) fn takes(moving: usize) -> bool {
+fn takes(moving: usize) -> bool {
     moving <= MAX_BODIES
-}
-
-/// Whether a system that moves this many bodies is large for the interior
-/// point: more than a Newton step is cheap for (`DENSE_BODIES`).
-pub(super) fn is_large(moving: usize) -> bool {
-    moving > DENSE_BODIES
 }
 
 fn max_diag(system: &IterativeSystem) -> f64 {

@@ -14,7 +14,7 @@
 //! second on a few rows, which the next step's overlap recovery mends.
 
 use super::subspace;
-use super::system::{IterativeState, IterativeSystem, Step};
+use crate::contact::system::{IterativeState, IterativeSystem, Step};
 
 /// The large-island method's settings.
 #[derive(Clone, Copy, Debug)]
@@ -50,14 +50,14 @@ impl Default for PileSweepSettings {
 
 /// What a solve by this method gave: the impulses, whether they meet the
 /// conditions, the sweeps taken.
-pub(super) struct PileAnswer {
-    pub(super) p: Vec<f64>,
-    pub(super) met: bool,
-    pub(super) sweeps: u32,
+pub(crate) struct PileAnswer {
+    pub(crate) p: Vec<f64>,
+    pub(crate) met: bool,
+    pub(crate) sweeps: u32,
 }
 
 /// Solves `system` by sweeps from `warm` (`bodies`: the island's bodies).
-pub(super) fn solve(
+pub(crate) fn solve(
     system: &IterativeSystem,
     warm: &[f64],
     bodies: usize,
