@@ -88,12 +88,14 @@ impl Row {
     }
 
     /// Relative velocity along the row: J·v.
+    #[inline]
     pub(super) fn velocity(&self, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> f64 {
         self.lin.dot(&v[self.a]) + self.ang_a.dot(&w[self.a]) - self.lin.dot(&v[self.b])
             + self.ang_b.dot(&w[self.b])
     }
 
     /// Adds the velocity change of an impulse `p` on this row to both bodies.
+    #[inline]
     pub(super) fn change_velocities(&self, p: f64, v: &mut [Vector3<f64>], w: &mut [Vector3<f64>]) {
         v[self.a] += self.dva * p;
         w[self.a] += self.dwa * p;
@@ -557,6 +559,7 @@ impl<'a> IterativeSystem<'a> {
 
     /// Row i's bounds; a friction row's are its coefficients times its
     /// normal row's impulse.
+    #[inline]
     pub(super) fn bounds(&self, i: usize, p: &[f64]) -> (f64, f64) {
         match self.findex[i] {
             None => (self.lo[i], self.hi[i]),
@@ -565,6 +568,7 @@ impl<'a> IterativeSystem<'a> {
     }
 
     /// w_i = (A p + b)_i + c·A_ii·p_i.
+    #[inline]
     pub(super) fn velocity(&self, i: usize, s: &IterativeState) -> f64 {
         self.b[i] + self.rows[i].velocity(&s.dv, &s.dw) + self.compliance * self.diag[i] * s.p[i]
     }
