@@ -11,7 +11,7 @@ use crate::output::write_atomic;
 use crate::render::{Frame, FrameSink, Pose};
 use crate::scene::Scene;
 use crate::scene::bounds::{self, readable};
-use crate::step::{Executor, World};
+use crate::step::{Executor, Stage, World};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -300,9 +300,9 @@ pub fn run_driven(
             .map_err(|e| io(e, "trajectory.csv"))?;
     }
     if render_stride.is_some() && marks.is_none() {
-        let clock = Instant::now();
+        let timer = world.stage.start(Stage::Render);
         publish(frames, &world, &mut frame_index, &mut frame_digests);
-        world.stage.render += clock.elapsed().as_secs_f64();
+        world.stage.stop(timer);
     }
     // Writes the world as it stands; the trajectory is flushed first so the
     // file holds every row up to the checkpoint's time.
@@ -353,9 +353,9 @@ pub fn run_driven(
         }
         if let Some(stride) = render_stride {
             if s % stride == 0 {
-                let clock = Instant::now();
+                let timer = world.stage.start(Stage::Render);
                 publish(frames, &world, &mut frame_index, &mut frame_digests);
-                world.stage.render += clock.elapsed().as_secs_f64();
+                world.stage.stop(timer);
             }
         }
         if checkpoint_stride.is_some_and(|k| s % k == 0) {
@@ -416,14 +416,14 @@ pub fn run_driven(
     }
     // Simulation time ends here; waiting for the renderer to drain is render time.
     let wall = started.elapsed().as_secs_f64();
-    let clock = Instant::now();
+    let timer = world.stage.start(Stage::Render);
     let (frames_rendered, frames_dropped, adapter, frame_notes) = if render_stride.is_some() {
         frames.finish(frame_of(&world, frame_index, first_frame))
     } else {
         (0, 0, None, Vec::new())
     };
     notes.extend(frame_notes);
-    world.stage.render += clock.elapsed().as_secs_f64();
+    world.stage.stop(timer);
     let (mut per_rank, mut distributed) = exec.finish();
     distributed.close(wall, world.group_work());
     per_rank.extend(frames.rank_summary());

@@ -1,7 +1,8 @@
 //! `summary.json`: what a run did, how long it took and how it ended.
 
 use crate::step::Fall;
-use crate::step::stats::{Counters, StageSeconds};
+use crate::step::StageSeconds;
+use crate::step::stats::Counters;
 pub use crate::step::stats::{Distribution, RankSummary};
 use serde::{Deserialize, Serialize};
 use std::path::Path;

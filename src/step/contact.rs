@@ -4,9 +4,10 @@
 //! starts from each pair's last solve; and the bookkeeping an impact loop
 //! needs of each solve (who was solved together, who spins).
 
-use super::Executor;
+use super::executor::{Executor, Segment};
 use super::kept::{self, Kept};
-use super::region::{Region, Segment, pose};
+use super::region::{Region, pose};
+use super::timers::Stage;
 use super::touching::{Touching, WarmContact};
 use crate::body::BodyId;
 use crate::collision::manifold::ContactPoint;
@@ -14,7 +15,6 @@ use crate::contact::island;
 use crate::contact::solver::{IslandBody, IslandContact, IslandTask, SPECULATIVE_GAP};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
-use std::time::Instant;
 
 /// What one contact solve leaves for the rest of the step.
 pub(crate) struct Solved {
@@ -137,7 +137,7 @@ impl Region<'_> {
         seg: &mut [Segment],
         h: f64,
     ) -> Solved {
-        let clock = Instant::now();
+        let timer = self.stage.start(Stage::BuildIslands);
         let n = self.bodies.len();
         // Island sizes matter only to near points (none in the exact model).
         let piles = touching
@@ -287,9 +287,9 @@ impl Region<'_> {
             });
         }
         self.counters.islands += tasks.len() as u64;
-        self.stage.build_islands += clock.elapsed().as_secs_f64();
+        self.stage.stop(timer);
 
-        let clock = Instant::now();
+        let timer = self.stage.start(Stage::SolveIslands);
         crate::output::capture::islands(&tasks);
         let results = if self.keep_answers {
             solve_again_or_anew(exec, tasks)
@@ -334,7 +334,7 @@ impl Region<'_> {
                 s.torque += r.torque[k];
             }
         }
-        self.stage.solve_islands += clock.elapsed().as_secs_f64();
+        self.stage.stop(timer);
         // An island whose solve holds a resting force, with its fastest
         // spinner: that force is trusted for `SPIN_TRUST` of turn.
         let spinning = islands

@@ -1,19 +1,20 @@
 //! One step of the whole world, as SPEC 2.1's frame loop: each stage a
 //! function of its own, in the order the step takes them.
 
+use super::check_states;
 use super::contact::SpinResolves;
-use super::group::{self, GroupOutput, StepStart};
-use super::region::{PairKey, PairMap, Region, Segment};
+use super::executor::{Executor, GroupOutput, PairKey, Segment, Since};
+use super::group::{self, StepStart};
+use super::region::{PairMap, Region};
 use super::stats::{GroupWork, NumericalFailure};
-use super::toi::{Since, SolvedSince};
+use super::timers::Stage;
+use super::toi::SolvedSince;
 use super::touching::Touching;
-use super::{Executor, check_states};
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
 use std::collections::BTreeSet;
-use std::time::Instant;
 
 /// One step of the whole world (`World::step`).
 pub(super) fn step_world(
@@ -42,7 +43,7 @@ pub(super) fn step_world(
     // group tests its own pairs at the end of the step, then takes its
     // impacts. The stage time is the groups' wall time less the stages
     // they call (counted under theirs).
-    let clock = Instant::now();
+    let timer = w.stage.start(Stage::TimeOfImpact);
     let start = StepStart {
         seg: solved.seg,
         end,
@@ -75,11 +76,10 @@ pub(super) fn step_world(
     // The pairs between a split group's parts, which no part held, and
     // what its first stage and the checks between its parts counted.
     merged.pairs.extend(done.between);
-    merged.nested += done.stage.nested();
     w.counters.add(&done.counters);
-    w.stage.narrowphase += done.stage.narrowphase;
-    w.stage.broadphase += done.stage.broadphase;
-    w.stage.time_of_impact += clock.elapsed().as_secs_f64() - merged.nested;
+    w.stage
+        .add(&done.stage, &[Stage::Narrowphase, Stage::Broadphase]);
+    w.stage.stop(timer);
     // Commit the end states, the contacts touching now and the caches.
     *touching = commit(w, start.end, merged, max_penetration);
     count_start_ghosts(w, touching);
@@ -189,7 +189,7 @@ fn solve_touching(
 
 /// Every awake body to the end of the step along its segment.
 fn integrate(w: &mut Region, seg: &[Segment]) -> Vec<BodyState> {
-    let clock = Instant::now();
+    let timer = w.stage.start(Stage::Integrate);
     let h = w.st.settings.dt;
     let mut end: Vec<BodyState> = seg.iter().map(|s| s.state).collect();
     let mut moving = 0u64;
@@ -205,7 +205,7 @@ fn integrate(w: &mut Region, seg: &[Segment]) -> Vec<BodyState> {
         .iter()
         .filter(|b| b.activity == Activity::Sleeping)
         .count() as u64;
-    w.stage.integrate += clock.elapsed().as_secs_f64();
+    w.stage.stop(timer);
     end
 }
 
@@ -226,8 +226,6 @@ struct Merged {
     ends: Vec<(usize, BodyState)>,
     /// Every group's pairs with their final results.
     pairs: Vec<(PairKey, PairResult)>,
-    /// Stage seconds the groups spent in nested stages.
-    nested: f64,
 }
 
 /// Takes each group's results into the world, in group-id order: its
@@ -237,7 +235,6 @@ fn merge_groups(w: &mut Region, runs: Vec<GroupOutput>, reruns: u64) -> Merged {
     let mut merged = Merged {
         ends: Vec::new(),
         pairs: Vec::new(),
-        nested: 0.0,
     };
     let mut events = 0u64;
     w.counters.groups += runs.len() as u64;
@@ -273,12 +270,17 @@ fn merge_groups(w: &mut Region, runs: Vec<GroupOutput>, reruns: u64) -> Merged {
                 .map(|((a, b), f)| ((BodyId(ids[a.index()]), BodyId(ids[b.index()])), f)),
         );
         w.counters.add(&g.counters);
-        merged.nested += g.stage.nested();
-        w.stage.broadphase += g.stage.broadphase;
-        w.stage.narrowphase += g.stage.narrowphase;
-        w.stage.build_islands += g.stage.build_islands;
-        w.stage.solve_islands += g.stage.solve_islands;
-        w.stage.integrate += g.stage.integrate;
+        // Not its time of impact: the step's own timer holds that.
+        w.stage.add(
+            &g.stage,
+            &[
+                Stage::Broadphase,
+                Stage::Narrowphase,
+                Stage::BuildIslands,
+                Stage::SolveIslands,
+                Stage::Integrate,
+            ],
+        );
         events += g.events;
     }
     w.counters.max_events_in_step = w.counters.max_events_in_step.max(events);

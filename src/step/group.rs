@@ -24,30 +24,23 @@
 //! Repeated until nothing new meets, so every meeting is handled as if the
 //! group had been one from the start, whatever the number of ranks.
 
-use super::Executor;
-use super::StepSwitches;
 use super::contact::{SolvedTogether, SpinResolves};
-use super::impacts::step_group;
-use super::region::{PairKey, PairMap, Region, Segment, StepStatic};
-use super::stats::{Counters, NumericalFailure, StageSeconds};
-use super::toi::{Since, SolvedSince};
+use super::executor::{
+    Executor, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PairKey,
+    PreparedPairs, Segment, StepStatic,
+};
+use super::impacts::{GroupState, step_group};
+use super::region::{PairMap, Region};
+use super::stats::{Counters, NumericalFailure};
+use super::timers::{Stage, StageSeconds};
+use super::toi::SolvedSince;
 use super::touching::{Touching, WarmContact};
-use crate::body::Body;
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::{self, SphereProxy};
-use crate::collision::narrowphase::CachedFeatures;
 use crate::collision::narrowphase::PairResult;
 use crate::contact::island::DisjointSets;
-use crate::scene::Scene;
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
-
-/// Share of its radius by which each predicted swept sphere grows when the
-/// groups are formed (`plan_groups`; not for the pairs tested): without it
-/// a pile's group often re-runs, with more the groups grow and each event
-/// costs more. Results do not depend on it.
-pub const GROUP_MARGIN: f64 = 0.25;
 
 /// What the whole world holds when the impact stage starts (world indices),
 /// from which every group's input is cut.
@@ -288,63 +281,6 @@ pub(crate) fn group_input(
     }
 }
 
-/// What a group's impact loop carries from one event to the next.
-pub(crate) struct GroupState {
-    pub seg: Vec<Segment>,
-    pub end: Vec<BodyState>,
-    /// The group's candidate pairs (their end-of-step narrowphase is the
-    /// group step's first stage).
-    pub pairs: Vec<PairKey>,
-    pub since: SolvedSince,
-    pub separating: PairMap<Vector3<f64>>,
-    pub together: SolvedTogether,
-    pub spin_resolves: SpinResolves,
-    /// The first stage's answers, when computed beforehand in shares
-    /// (`prepare_pairs`); `None`: the step computes them.
-    pub prepared: Option<PreparedPairs>,
-    /// Whether the step returns the segments its bodies took
-    /// (`GroupOutput::paths`): a part of a split group does.
-    pub keep_paths: bool,
-}
-
-/// The first stage of a group's step for some of its pairs: their
-/// end-of-step results and times of impact. Each pair's answer depends
-/// only on the group's input, so a large group's pairs can be shared out
-/// over ranks (`prepare_pairs`) before one rank takes its events; the step
-/// then starts from these answers instead of computing them, and ends
-/// exactly as it would have.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct PreparedPairs {
-    pub(crate) results: Vec<PairResult>,
-    pub(crate) toi: Vec<Option<f64>>,
-    pub(crate) counters: Counters,
-    pub(crate) stage: StageSeconds,
-    /// Wall seconds it took where it ran (part of the group's cost).
-    pub(crate) busy_s: f64,
-}
-
-impl PreparedPairs {
-    /// V-Clip tasks it ran.
-    pub fn tasks(&self) -> u64 {
-        self.counters.pair_tests
-    }
-
-    /// The shares of one group's pairs, in the order of their ranges, as
-    /// one (the ranges must cover the pairs in order).
-    pub fn joined(shares: Vec<PreparedPairs>) -> PreparedPairs {
-        let mut all = PreparedPairs::default();
-        for s in shares {
-            all.results.extend(s.results);
-            all.toi.extend(s.toi);
-            all.counters.add(&s.counters);
-            all.stage.narrowphase += s.stage.narrowphase;
-            all.stage.time_of_impact += s.stage.time_of_impact;
-            all.busy_s += s.busy_s;
-        }
-        all
-    }
-}
-
 /// The first stage of group `input`'s step for its pairs `from..to`
 /// (`PreparedPairs`), on any rank; `exec` runs its narrowphase batch and
 /// is polled before each pair's time of impact (`Executor::poll`).
@@ -380,7 +316,7 @@ pub fn prepare_pairs(
     let separating: PairMap<Vector3<f64>> = input.separating.iter().cloned().collect();
     let since: SolvedSince = input.since.iter().cloned().collect();
     let results = g.narrowphase_skipping_separating(exec, pairs, &input.end, &separating);
-    let toi_clock = std::time::Instant::now();
+    let timer = g.stage.start(Stage::TimeOfImpact);
     let h = st.settings.dt;
     let toi = pairs
         .iter()
@@ -390,195 +326,13 @@ pub fn prepare_pairs(
             g.time_of_impact(k, r, &input.seg, h, &since)
         })
         .collect();
-    g.stage.time_of_impact += toi_clock.elapsed().as_secs_f64();
+    g.stage.stop(timer);
     PreparedPairs {
         results,
         toi,
         counters: g.counters,
         stage: g.stage,
         busy_s: clock.elapsed().as_secs_f64(),
-    }
-}
-
-/// What a group's step reads besides the scene: the step's start time and
-/// the world's switches. Sent with the groups a worker steps.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct GroupParams {
-    t0: f64,
-    switches: StepSwitches,
-}
-
-impl GroupParams {
-    /// The world's switches for a step starting at `t0`.
-    pub(crate) fn of_world(w: &super::World, t0: f64) -> Self {
-        GroupParams {
-            t0,
-            switches: w.switches,
-        }
-    }
-
-    pub(crate) fn of(st: &StepStatic) -> Self {
-        GroupParams {
-            t0: st.t0,
-            switches: st.switches,
-        }
-    }
-
-    /// The step's static data, with a scene that every rank loaded alike.
-    pub fn statics<'s>(&self, scene: &'s Scene) -> StepStatic<'s> {
-        StepStatic {
-            objects: &scene.objects,
-            settings: &scene.settings,
-            forces: &scene.forces,
-            t0: self.t0,
-            switches: self.switches,
-        }
-    }
-}
-
-/// One group's input, ids and state only (`group_input`): what rank 0 sends
-/// a worker to step.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct GroupInput {
-    ids: Vec<u32>,
-    bodies: Vec<Body>,
-    features: Vec<(PairKey, Vec<CachedFeatures>)>,
-    warm: Vec<((BodyId, BodyId), Vec<WarmContact>)>,
-    sleep_timer: Vec<f64>,
-    sleep_group: Vec<u32>,
-    seg: Vec<Segment>,
-    end: Vec<BodyState>,
-    pairs: Vec<PairKey>,
-    since: Vec<(PairKey, Since)>,
-    separating: Vec<(PairKey, Vector3<f64>)>,
-    /// Islands solved together at the step's start (local indices).
-    together: Vec<Vec<usize>>,
-    spin_resolves: Vec<(f64, usize)>,
-    /// Seconds its step is expected to take: what its bodies' groups took
-    /// last step (`GroupOutput::busy_s`, shared out over their members).
-    predicted_s: f64,
-    /// Its first stage, when computed beforehand (`GroupState::prepared`).
-    prepared: Option<PreparedPairs>,
-    /// Whether its step returns its bodies' segments (`GroupState::keep_paths`).
-    keep_paths: bool,
-}
-
-impl GroupInput {
-    /// Seconds its step is expected to take, for the schedule.
-    pub fn predicted_s(&self) -> f64 {
-        self.predicted_s
-    }
-
-    /// Its candidate pairs (the first stage's tasks).
-    pub fn pair_count(&self) -> usize {
-        self.pairs.len()
-    }
-
-    /// Whether its first stage was computed beforehand.
-    pub fn is_prepared(&self) -> bool {
-        self.prepared.is_some()
-    }
-
-    /// Hands the step its first stage, computed beforehand for all its
-    /// pairs in order (`prepare_pairs`, `PreparedPairs::joined`).
-    pub fn set_prepared(&mut self, prepared: PreparedPairs) {
-        assert_eq!(
-            prepared.results.len(),
-            self.pairs.len(),
-            "one answer per pair"
-        );
-        self.prepared = Some(prepared);
-    }
-}
-
-/// What a group's step returns (`step_group`), ids and state only.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct GroupOutput {
-    pub(crate) ids: Vec<u32>,
-    pub(crate) bodies: Vec<Body>,
-    pub(crate) sleep_timer: Vec<f64>,
-    pub(crate) end: Vec<BodyState>,
-    pub(crate) pairs: Vec<PairKey>,
-    pub(crate) results: Vec<PairResult>,
-    pub(crate) warm: Vec<((BodyId, BodyId), Vec<WarmContact>)>,
-    pub(crate) impacts: Vec<Touching>,
-    pub(crate) pair_forces: Vec<((BodyId, BodyId), f64)>,
-    pub(crate) counters: Counters,
-    pub(crate) stage: StageSeconds,
-    /// Impact events taken (spin re-solves not counted).
-    pub(crate) events: u64,
-    /// Swept spheres (world ids) of the paths its bodies took after their
-    /// first roll-back that leave their grown prediction.
-    pub(crate) pieces: Vec<SphereProxy>,
-    /// Wall seconds the step took where it ran (the next step's prediction).
-    pub(crate) busy_s: f64,
-    /// V-Clip tasks of its first stage run beforehand (`PreparedPairs`):
-    /// in `counters`, but counted where they ran.
-    pub(crate) prepared_tasks: u64,
-    /// Where asked for (`GroupState::keep_paths`): the segments each body
-    /// that left its predicted path took, in time order (world id; the
-    /// first is its segment at the step's start, each later one begins at
-    /// the event that rolled it back).
-    pub(crate) paths: Vec<(u32, Vec<Segment>)>,
-}
-
-impl GroupOutput {
-    /// V-Clip tasks and island solves the group's step ran.
-    pub fn tasks(&self) -> (u64, u64) {
-        (
-            self.counters.pair_tests - self.prepared_tasks,
-            self.counters.islands,
-        )
-    }
-}
-
-/// A numerical failure inside a group's step, as it travels between ranks.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct GroupFailure {
-    body: u32,
-    stage: String,
-    time: f64,
-    detail: String,
-}
-
-impl From<NumericalFailure> for GroupFailure {
-    fn from(f: NumericalFailure) -> Self {
-        GroupFailure {
-            body: f.body.0,
-            stage: f.stage.to_string(),
-            time: f.time,
-            detail: f.detail,
-        }
-    }
-}
-
-impl From<GroupFailure> for NumericalFailure {
-    fn from(f: GroupFailure) -> Self {
-        NumericalFailure {
-            body: BodyId(f.body),
-            stage: if f.stage == "integrate" {
-                "integrate"
-            } else {
-                "solve_islands"
-            },
-            time: f.time,
-            detail: f.detail,
-        }
-    }
-}
-
-/// One group's answer: its output, or where it went numerically wrong.
-/// (`None` only as a placeholder while answers are gathered.)
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct GroupReply(pub(crate) Option<Result<GroupOutput, GroupFailure>>);
-
-impl GroupReply {
-    /// V-Clip tasks and island solves the group's step ran.
-    pub fn tasks(&self) -> (u64, u64) {
-        match &self.0 {
-            Some(Ok(out)) => out.tasks(),
-            _ => (0, 0),
-        }
     }
 }
 
@@ -994,8 +748,8 @@ fn paths_meet(
         result = Some(r);
     }
     done.counters.add(&g.counters);
-    done.stage.narrowphase += g.stage.narrowphase;
-    done.stage.broadphase += g.stage.broadphase;
+    done.stage
+        .add(&g.stage, &[Stage::Narrowphase, Stage::Broadphase]);
     result
 }
 
@@ -1066,7 +820,7 @@ pub(crate) fn step_groups<'s>(
             continue;
         };
         done.counters.add(&prepared.counters);
-        done.stage.narrowphase += prepared.stage.narrowphase;
+        done.stage.add(&prepared.stage, &[Stage::Narrowphase]);
         let family = Family {
             members: plan.members.clone(),
             first: plan

@@ -1,19 +1,20 @@
 //! A group's step (`step_group`): the end-of-step narrowphase of its pairs,
 //! then every impact event in time order, with the event-local bookkeeping
 //! (`PairBook`) that makes an event cost what the bodies it moved cost.
-//! Reads only the group's own `Region` and `GroupState` (see `group`).
+//! Reads only the group's own `Region` and `GroupState` (built by `group`).
 
-use super::group::{GroupOutput, GroupState, PreparedPairs};
-use super::region::{PairKey, PairMap, Region, Segment};
+use super::contact::{SolvedTogether, SpinResolves};
+use super::executor::{Executor, GroupOutput, PairKey, PreparedPairs, Segment, Since};
+use super::region::{PairMap, Region};
 use super::stats::NumericalFailure;
-use super::toi::{Search, Since, SolvedSince};
-use super::{EVENTS_PER_BODY, Executor, MAX_EARLIER_IMPACTS};
+use super::timers::Stage;
+use super::toi::{Search, SolvedSince};
+use super::{EVENTS_PER_BODY, MAX_EARLIER_IMPACTS};
 use crate::body::{Activity, BodyState};
 use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
 use std::collections::{BTreeMap, BTreeSet};
-use std::time::Instant;
 
 /// An impact time ordered for the queue (finite, so `total_cmp` is the
 /// usual order).
@@ -257,6 +258,25 @@ impl PairBook {
     }
 }
 
+/// What a group's impact loop carries from one event to the next.
+pub(crate) struct GroupState {
+    pub seg: Vec<Segment>,
+    pub end: Vec<BodyState>,
+    /// The group's candidate pairs (their end-of-step narrowphase is the
+    /// group step's first stage).
+    pub pairs: Vec<PairKey>,
+    pub since: SolvedSince,
+    pub separating: PairMap<Vector3<f64>>,
+    pub together: SolvedTogether,
+    pub spin_resolves: SpinResolves,
+    /// The first stage's answers, when computed beforehand in shares
+    /// (`prepare_pairs`); `None`: the step computes them.
+    pub prepared: Option<PreparedPairs>,
+    /// Whether the step returns the segments its bodies took
+    /// (`GroupOutput::paths`): a part of a split group does.
+    pub keep_paths: bool,
+}
+
 /// The group step: every impact event of the group in time order. An event
 /// rolls the bodies that must move with it back to its instant τ, solves
 /// their contacts there, re-integrates them to the step's end and retests
@@ -286,8 +306,8 @@ pub(crate) fn step_group(
     let (results, prepared_toi) = match prepared {
         Some(p) => {
             g.counters.add(&p.counters);
-            g.stage.narrowphase += p.stage.narrowphase;
-            g.stage.time_of_impact += p.stage.time_of_impact;
+            g.stage
+                .add(&p.stage, &[Stage::Narrowphase, Stage::TimeOfImpact]);
             (p.results, Some(p.toi))
         }
         None => (
@@ -296,8 +316,7 @@ pub(crate) fn step_group(
         ),
     };
     let keys = prepared_toi.as_ref().map(|_| pairs.clone());
-    let clock = Instant::now();
-    let nested_before = g.stage.nested();
+    let timer = g.stage.start(Stage::TimeOfImpact);
     let mut book = PairBook::new(&g, &seg, &end, pairs, results);
     if let (Some(keys), Some(toi)) = (keys, prepared_toi) {
         book.known(&keys, toi);
@@ -487,14 +506,14 @@ pub(crate) fn step_group(
         g.counters.integrations += members.len() as u64;
         // The members' new paths may reach new bodies of the group: their
         // pairs are found and tested again; every other pair stands.
-        let clock = Instant::now();
+        let broadphase = g.stage.start(Stage::Broadphase);
         for &i in &members {
             book.forget(i);
             book.sweep(&g, i, &seg, &end);
         }
         let redo = book.candidates(&g, &members);
         g.counters.candidate_pairs += redo.len() as u64;
-        g.stage.broadphase += clock.elapsed().as_secs_f64();
+        g.stage.stop(broadphase);
         let redone = g.narrowphase_skipping_separating(exec, &redo, &end, &separating);
         for (k, r) in redo.into_iter().zip(redone) {
             book.insert(k, r);
@@ -511,7 +530,7 @@ pub(crate) fn step_group(
             .get(&(a.0, b.0))
             .is_some_and(|r| !r.contacts.is_empty())
     });
-    g.stage.time_of_impact += clock.elapsed().as_secs_f64() - (g.stage.nested() - nested_before);
+    g.stage.stop(timer);
     let (pairs, results) = book.results.into_iter().unzip();
     let paths = (0..paths.len())
         .filter(|&i| left[i])

@@ -18,14 +18,16 @@
 //! the stages every body takes (`frame`), one group for its narrowphase and
 //! impacts (`group` forms and merges the groups, `impacts` steps one). The
 //! time of impact itself is `toi`, the contact solve `contact`, resting
-//! systems `sleep`, and what is counted and timed `stats`.
+//! systems `sleep`, what is counted `stats` and what is timed `timers`.
 //!
-//! The pure work (V-Clip on pairs, LCP on islands) goes through an
-//! `Executor`: inline on one rank, or scattered over MPI ranks by `cluster`.
+//! The pure work (V-Clip on pairs, LCP on islands, whole group steps) goes
+//! through an `Executor` (`executor`, with all it carries): inline on one
+//! rank (`Inline`), or scattered over MPI ranks by `cluster`.
 //! Results come back in task order, and groups are merged by id, so the
 //! outcome never depends on which rank did what.
 
 mod contact;
+mod executor;
 mod frame;
 mod group;
 mod impacts;
@@ -34,81 +36,33 @@ mod region;
 mod sleep;
 pub mod stats;
 mod switches;
+mod timers;
 mod toi;
 mod touching;
 
 pub use crate::scene::bounds::MAX_SPEED;
 pub use contact::{MAX_SPIN_RESOLVES_PER_STEP, SPIN_TRUST};
-pub use group::{
-    GROUP_MARGIN, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PreparedPairs,
-    SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group,
+pub use executor::{
+    Executor, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PreparedPairs,
+    StepStatic,
 };
-pub use region::StepStatic;
+pub use group::{SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group};
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
-pub use stats::{Counters, NumericalFailure, StageSeconds};
-pub use switches::StepSwitches;
+pub use stats::{Counters, NumericalFailure};
+pub use switches::{GROUP_MARGIN, StepSwitches};
+pub use timers::{Stage, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
 pub(crate) use touching::{Touching, WarmContact};
 
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
-use crate::scene::{ForceWindow, Scene};
+use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
 use region::Region;
 use stats::{Distribution, GroupWork, RankSummary};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
-
-/// Runs the distributable stages. One rank: `Inline`; several: `cluster`.
-pub trait Executor {
-    fn narrowphase(&mut self, objects: &[ObjectDef], tasks: Vec<PairTask>) -> Vec<PairResult>;
-    fn solve_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult>;
-    /// The `time_of_impact` stage: each group's step (`group::run_group`),
-    /// answers in the order of `inputs`.
-    fn step_groups(
-        &mut self,
-        st: &StepStatic,
-        params: &GroupParams,
-        inputs: Vec<GroupInput>,
-    ) -> Vec<GroupReply>;
-    /// The first stage of each group's step for all its pairs
-    /// (`group::prepare_pairs`), answers in the order of `inputs`: what a
-    /// large group is split by (`group::split_group`).
-    fn prepare_groups(
-        &mut self,
-        st: &StepStatic,
-        params: &GroupParams,
-        inputs: Vec<GroupInput>,
-    ) -> Vec<PreparedPairs>;
-    /// Which of the step's groups (their predicted seconds and bodies, in
-    /// group order) to split into the parts that meet within the step
-    /// (`group::split_group`): piles (`group::SPLIT_AUTO_MIN_MEMBERS`) that
-    /// would hold up the ranks sharing the group steps, where splitting
-    /// measures faster. The choice changes the time, not the answer: a
-    /// split group ends as it would whole (`docs/architecture.md`). One
-    /// rank splits none (unless `StepSwitches::split_groups` asks for all).
-    fn split_groups(&mut self, groups: &[(f64, usize)]) -> Vec<bool> {
-        vec![false; groups.len()]
-    }
-    /// The step's groups are all stepped (after `split_groups`), so what
-    /// its choice cost can be measured.
-    fn groups_stepped(&mut self) {}
-    /// Called between a group step's pieces of work that use no other
-    /// stage (each pair's time of impact): rank 0, stepping a group of its
-    /// own, answers the workers there (`cluster::Polled`), so that one
-    /// done with its chunk gets the next within microseconds. Changes no
-    /// result.
-    fn poll(&mut self) {}
-    /// The scene's external forces changed at a step boundary (a live
-    /// live run's hand, `run --inputs`): every rank that steps groups must
-    /// integrate with these from the next step on. Inline: nothing to do,
-    /// the step reads `World::scene`.
-    fn share_forces(&mut self, _forces: &[ForceWindow]) {}
-    /// Ends the run on every rank; returns the per-rank accounts and how often
-    /// each stage was distributed.
-    fn finish(&mut self) -> (Vec<RankSummary>, Distribution);
-}
 
 /// Runs every stage on this rank.
 #[derive(Default)]
@@ -316,7 +270,7 @@ impl World {
     pub fn step(&mut self, exec: &mut dyn Executor) -> Result<(), NumericalFailure> {
         let t0 = self.time();
         let n = self.bodies.len();
-        let st = GroupParams::of_world(self, t0).statics(&self.scene);
+        let st = GroupParams::new(t0, self.switches).statics(&self.scene);
         use std::mem::take;
         let mut world = Region {
             st: &st,

@@ -7,10 +7,10 @@
 //! every tie-break on local pair keys orders pairs exactly as on world ids,
 //! and a group's result never depends on which other bodies the world holds.
 
-use super::Executor;
-use super::StepSwitches;
+use super::executor::{Executor, PairKey, Segment, StepStatic};
 use super::kept::{self, Kept};
-use super::stats::{Counters, StageSeconds};
+use super::stats::Counters;
+use super::timers::{Stage, StageSeconds};
 use super::touching::{Touching, WarmContact};
 use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
 use crate::collision::broadphase::{self, SphereProxy};
@@ -19,27 +19,10 @@ use crate::collision::narrowphase::{
 };
 use crate::dynamics::integrate::integrate;
 use crate::math;
-use crate::scene::{ForceWindow, Settings};
 use nalgebra::{Isometry3, Vector3};
 use rustc_hash::FxBuildHasher;
 use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::time::Instant;
-
-/// What every region of one step reads and nothing changes: the scene's
-/// objects, settings and force windows, the step's start time, and the
-/// world's switches.
-pub struct StepStatic<'s> {
-    pub(crate) objects: &'s [ObjectDef],
-    pub(crate) settings: &'s Settings,
-    pub(crate) forces: &'s [ForceWindow],
-    /// Simulated time at the step's start.
-    pub(crate) t0: f64,
-    pub(crate) switches: StepSwitches,
-}
-
-/// A body pair in local indices, `a < b`.
-pub(crate) type PairKey = (u32, u32);
 
 /// A map keyed by body pair. Fx, not std's SipHash: the step looks pairs up
 /// hundreds of thousands of times (feature caches, separating pairs, times
@@ -94,16 +77,6 @@ const INTEGRATED_KEPT: usize = 1 << 12;
 /// with the same bits.
 #[derive(Default)]
 pub(crate) struct Integrated(RefCell<HashMap<[u64; 21], BodyState, FxBuildHasher>>);
-
-/// A body's motion over the current step: start state at `time` (seconds into
-/// the step) with constant force and torque until the end of the step.
-#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
-pub(crate) struct Segment {
-    pub state: BodyState,
-    pub time: f64,
-    pub force: Vector3<f64>,
-    pub torque: Vector3<f64>,
-}
 
 /// A body state's pose, as narrowphase takes it.
 pub(crate) fn pose(s: &BodyState) -> Isometry3<f64> {
@@ -201,7 +174,7 @@ impl<'s> Region<'s> {
         seg: &[Segment],
         end: &[BodyState],
     ) -> (Vec<PairKey>, Vec<SphereProxy>) {
-        let clock = Instant::now();
+        let timer = self.stage.start(Stage::Broadphase);
         let proxies = self.swept_spheres(seg, end);
         let resting = std::cell::Cell::new(0u64);
         let pairs = broadphase::candidate_pairs(&proxies, |a, b| {
@@ -211,7 +184,7 @@ impl<'s> Region<'s> {
         });
         self.counters.candidate_pairs += pairs.len() as u64;
         self.counters.pairs_skipped_resting += resting.get();
-        self.stage.broadphase += clock.elapsed().as_secs_f64();
+        self.stage.stop(timer);
         (pairs, proxies)
     }
 
@@ -308,7 +281,7 @@ impl<'s> Region<'s> {
         states: &[BodyState],
         separating: &PairMap<Vector3<f64>>,
     ) -> Vec<PairResult> {
-        let clock = Instant::now();
+        let timer = self.stage.start(Stage::Narrowphase);
         let skipped: Vec<bool> = pairs
             .iter()
             .map(|&(a, b)| {
@@ -328,7 +301,7 @@ impl<'s> Region<'s> {
             .collect();
         let skips = pairs.len() - tested.len();
         self.counters.pairs_skipped_separating += skips as u64;
-        self.stage.narrowphase += clock.elapsed().as_secs_f64();
+        self.stage.stop(timer);
         let mut results = self.narrowphase_at(exec, &tested, states).into_iter();
         skipped
             .iter()
@@ -363,7 +336,7 @@ impl<'s> Region<'s> {
         exec: &mut dyn Executor,
         tasks: Vec<PairTask>,
     ) -> Vec<PairResult> {
-        let clock = Instant::now();
+        let timer = self.stage.start(Stage::Narrowphase);
         self.counters.pair_tests += tasks.len() as u64;
         let results = if self.keep_answers {
             // A part of a split group (`super::kept`): a pair test is a
@@ -386,7 +359,7 @@ impl<'s> Region<'s> {
         for r in &results {
             self.counters.vclip_iterations += r.iterations as u64;
         }
-        self.stage.narrowphase += clock.elapsed().as_secs_f64();
+        self.stage.stop(timer);
         results
     }
 

@@ -3,7 +3,8 @@
 //! and wake, with their whole system, when something touches them or a
 //! force window on one of them opens or closes.
 
-use super::region::{Region, Segment};
+use super::executor::Segment;
+use super::region::Region;
 use super::touching::Touching;
 use crate::body::{Activity, BodyId, BodyKind};
 use crate::contact::island;

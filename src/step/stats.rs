@@ -1,29 +1,11 @@
-//! What a run counts and times: per stage, per rank, and the work it did and
-//! skipped. A leaf module: `step` fills these in and `output` writes them.
+//! What a run counts and measures besides its stage seconds (`timers`):
+//! the work it did and skipped, per rank, and how its stages were
+//! distributed. A leaf module: `step` fills these in and `output` writes
+//! them.
 
 use crate::body::BodyId;
 use crate::contact::solver::SolveStats;
 use serde::{Deserialize, Serialize};
-
-/// Wall seconds per stage (summary's `stage_seconds`).
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct StageSeconds {
-    pub integrate: f64,
-    pub broadphase: f64,
-    pub narrowphase: f64,
-    pub time_of_impact: f64,
-    pub build_islands: f64,
-    pub solve_islands: f64,
-    pub communication: f64,
-    pub render: f64,
-}
-
-impl StageSeconds {
-    /// Stages that time-of-impact handling calls into.
-    pub(crate) fn nested(&self) -> f64 {
-        self.broadphase + self.narrowphase + self.build_islands + self.solve_islands
-    }
-}
 
 /// What the simulator did and what it skipped, counted over the run.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

@@ -4,6 +4,12 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Share of its radius by which each predicted swept sphere grows when the
+/// groups are formed (`group::plan_groups`; not for the pairs tested):
+/// without it a pile's group often re-runs, with more the groups grow and
+/// each event costs more. Results do not depend on it.
+pub const GROUP_MARGIN: f64 = 0.25;
+
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StepSwitches {
     /// Enables resting systems (on by default; analytic tests may switch it off).
@@ -20,7 +26,7 @@ pub struct StepSwitches {
     /// stack iterative).
     pub iterative_min_rows: usize,
     /// Share of its radius by which each predicted sphere grows when the
-    /// groups are formed (`group::GROUP_MARGIN` by default; results do not
+    /// groups are formed (`GROUP_MARGIN` by default; results do not
     /// depend on it, a test compares).
     pub group_margin: f64,
     /// Splits large groups into the parts that interact within the step
@@ -38,7 +44,7 @@ impl Default for StepSwitches {
             skip_separating: true,
             warm_start: true,
             iterative_min_rows: crate::contact::solver::ITERATIVE_MIN_ROWS,
-            group_margin: super::group::GROUP_MARGIN,
+            group_margin: GROUP_MARGIN,
             split_groups: false,
         }
     }

@@ -4,10 +4,10 @@
 //! (`earlier_impact`). Pure over a `Region`: every query is counted in its
 //! `counters`.
 
-use super::Executor;
 use super::contact::SolvedTogether;
+use super::executor::{Executor, PairKey, Segment, Since};
 use super::kept::{self, Kept};
-use super::region::{PairKey, PairMap, Region, Segment, pose};
+use super::region::{PairMap, Region, pose};
 use crate::body::{BodyKind, BodyState, ObjectDef};
 use crate::collision::manifold::NormalTurn;
 use crate::collision::narrowphase::{self, CONTACT_TOLERANCE, PairResult, PairTask};
@@ -40,13 +40,6 @@ pub(crate) fn allowed_depth(carried: f64) -> f64 {
 /// overlap its points already had then is carried, not new
 /// (`Region::sinking`). Pairs not listed carried none.
 pub(crate) type SolvedSince = PairMap<Since>;
-
-#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
-pub(crate) struct Since {
-    pub time: f64,
-    pub deepest: f64,
-}
-
 /// An instant at which a pair was found apart, and V-Clip's distance then.
 type Apart = (f64, f64);
 
