@@ -4,7 +4,7 @@
 //! A capture is a folder of files, one `IslandTask` each, bincode
 //! (`bincode::config::standard()`, serde). `RIGIDSIM_CAPTURE_ISLANDS=DIR`
 //! makes a run write every island of `CAPTURE_MIN_ROWS` rows or more it
-//! solves there (see `step::capture`); `tests/data/islands/` holds a few.
+//! solves there (see `output::capture`); `tests/data/islands/` holds a few.
 //!
 //! Run: `cargo bench --bench islands -- [DIR]` (default `tests/data/islands`);
 //! prints a line per size class, the totals, and a line per path the

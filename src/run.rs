@@ -3,6 +3,7 @@
 //! for the renderer, and the summary.
 
 use crate::body::Activity;
+use crate::output::capture;
 use crate::output::checkpoint::{self, Checkpoint, RunMarks};
 use crate::output::progress::Progress;
 use crate::output::summary::{self, RankHost, RankLine, Summary};
@@ -248,6 +249,8 @@ pub fn run_driven(
             (world, Some(marks), traj, continued)
         }
     };
+    // `--capture-islands`: the step keeps the islands, written after it.
+    world.switches.capture_min_rows = capture::min_rows();
     let checkpoint_path = out_dir.join(checkpoint::FILE_NAME);
     let checkpoint_stride = opts
         .checkpoint_every
@@ -341,7 +344,10 @@ pub fn run_driven(
             end_reason = reason;
             break;
         }
-        if let Err(f) = world.step(exec) {
+        let stepped = world.step(exec);
+        // Also after a failure: its islands are the ones to look at.
+        capture::islands(&world.captured_islands);
+        if let Err(f) = stepped {
             failure = Some(f.to_string());
             break;
         }

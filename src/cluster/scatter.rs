@@ -184,7 +184,8 @@ impl MpiExecutor<'_> {
     /// chunks from the front and gets the next when it answers, and rank 0
     /// steps single tasks from the back in between, so no rank waits while
     /// work is left. Results are merged by task index, never by arrival
-    /// order or by where a task ran. Returns the results and rank 0's tasks.
+    /// order or by where a task ran. Returns the results and rank 0's
+    /// tasks, in the order it ran them.
     pub(super) fn self_schedule<T, R>(
         &mut self,
         workers: usize,
@@ -299,7 +300,6 @@ impl MpiExecutor<'_> {
         self.book[0].cost_s += own_cost;
         self.book[0].waiting_s += wait.elapsed().as_secs_f64();
         self.meter(0, own_cost, own_s);
-        own.sort_unstable();
         let results = results
             .into_iter()
             .map(|r| r.expect("every task answered"))

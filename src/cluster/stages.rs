@@ -222,6 +222,17 @@ impl MpiExecutor<'_> {
             self.book[0].tasks_np += pairs;
             self.book[0].tasks_is += islands;
         }
+        // The islands rank 0's own group steps captured (`GroupReply`; the
+        // workers write theirs), which the step takes in group order: all
+        // with the first of its replies, in the order it ran them.
+        let mut replies = replies;
+        if let Some(&first) = own.iter().min() {
+            let captured: Vec<_> = own
+                .iter()
+                .flat_map(|&i| std::mem::take(&mut replies[i].1))
+                .collect();
+            replies[first].1 = captured;
+        }
         replies
     }
 }

@@ -4,6 +4,7 @@ use super::protocol::{self, Reply, Request as Req, WorkerReport, decode, encode}
 use super::speed::{stall, thread_cpu_time};
 use crate::collision::narrowphase;
 use crate::contact::solver;
+use crate::output::capture;
 use crate::scene::Scene;
 use crate::step::{GroupReply, Inline, PreparedPairs, prepare_pairs, run_group};
 use mpi::point_to_point::{Destination, Source};
@@ -76,6 +77,9 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
                     let (pairs, islands) = r.tasks();
                     report.narrowphase_tasks += pairs;
                     report.island_tasks += islands;
+                    // `--capture-islands`: written where they were built
+                    // (they do not travel with the reply).
+                    capture::islands(&r.1);
                 }
                 let busy = stall(slow, clock, cpu).as_secs_f64();
                 report.busy_s += busy;

@@ -83,6 +83,17 @@ pub struct IslandTask {
     pub iterative_min_rows: u32,
 }
 
+impl IslandTask {
+    /// The rows its solve builds: one per contact, two more per contact
+    /// with friction.
+    pub fn rows(&self) -> usize {
+        self.contacts
+            .iter()
+            .map(|c| if c.friction > 0.0 { 3 } else { 1 })
+            .sum()
+    }
+}
+
 /// Contact reply: per body (same order as the task), the impulse applied at
 /// the start of the step and the constant contact force over the step.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

@@ -3,11 +3,14 @@
 //! (`IslandTask`, bincode `config::standard()` over serde), for the solver's
 //! fixtures (`tests/data/islands/`) and its benchmark (`benches/islands.rs`).
 //!
-//! A test aid kept out of the simulation's data: the islands are written
-//! where they are solved (rank 0, or the worker a group step went to), so
-//! the files, not the run, depend on where each island went; names carry
-//! the rank and a count. Writing never changes the run; a file that cannot
-//! be written is reported once and capturing stops.
+//! A test aid kept out of the simulation's data: the step only keeps a
+//! copy of the islands it builds (`StepSwitches::capture_min_rows`), and
+//! the rank that built them writes them here after the step: rank 0 after
+//! each world step (`run`), a worker after each group step it ran
+//! (`cluster::worker_loop`). So the files, not the run, depend on where
+//! each island went; names carry the rank and a count. Writing never
+//! changes the run; a file that cannot be written is reported once and
+//! capturing stops.
 
 use crate::contact::solver::IslandTask;
 use std::path::PathBuf;
@@ -37,27 +40,27 @@ pub fn start(dir: PathBuf, min_rows: usize, rank: i32) -> std::io::Result<()> {
     Ok(())
 }
 
-/// The rows an island's solve builds: one per contact, two more per contact
-/// with friction.
-pub fn rows(task: &IslandTask) -> usize {
-    task.contacts
-        .iter()
-        .map(|c| if c.friction > 0.0 { 3 } else { 1 })
-        .sum()
+/// The smallest island (rows) to capture, if capturing: what the step is
+/// asked to keep (`StepSwitches::capture_min_rows`).
+pub fn min_rows() -> Option<usize> {
+    if !ON.load(Ordering::Relaxed) {
+        return None;
+    }
+    CAPTURE.lock().unwrap().as_ref().map(|c| c.min_rows)
 }
 
-/// Writes the tasks of `min_rows` rows or more, if capturing.
+/// Writes the tasks of `min_rows` rows or more, in order, if capturing.
 pub fn islands(tasks: &[IslandTask]) {
-    if !ON.load(Ordering::Relaxed) {
+    if tasks.is_empty() || !ON.load(Ordering::Relaxed) {
         return;
     }
     let guard = CAPTURE.lock().unwrap();
     let Some(c) = guard.as_ref() else { return };
-    for task in tasks.iter().filter(|t| rows(t) >= c.min_rows) {
+    for task in tasks.iter().filter(|t| t.rows() >= c.min_rows) {
         let k = WRITTEN.fetch_add(1, Ordering::Relaxed);
         let path = c
             .dir
-            .join(format!("r{}_{k:06}_{}rows.bin", c.rank, rows(task)));
+            .join(format!("r{}_{k:06}_{}rows.bin", c.rank, task.rows()));
         let written = bincode::serde::encode_to_vec(task, bincode::config::standard())
             .map_err(|e| e.to_string())
             .and_then(|bytes| std::fs::write(&path, bytes).map_err(|e| e.to_string()));

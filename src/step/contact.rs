@@ -288,9 +288,13 @@ impl Region<'_> {
         }
         self.counters.islands += tasks.len() as u64;
         self.stage.stop(timer);
+        // Kept for the caller to write (`--capture-islands`), in no stage's time.
+        if let Some(min_rows) = self.st.switches.capture_min_rows {
+            let large = tasks.iter().filter(|t| t.rows() >= min_rows);
+            self.captured.extend(large.cloned());
+        }
 
         let timer = self.stage.start(Stage::SolveIslands);
-        crate::output::capture::islands(&tasks);
         let results = if self.keep_answers {
             solve_again_or_anew(exec, tasks)
         } else {

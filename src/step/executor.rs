@@ -249,10 +249,16 @@ impl From<GroupFailure> for NumericalFailure {
     }
 }
 
-/// One group's answer: its output, or where it went numerically wrong.
-/// (`None` only as a placeholder while answers are gathered.)
+/// One group's answer: its output, or where it went numerically wrong
+/// (`None` only as a placeholder while answers are gathered); and the
+/// islands its step captured (`StepSwitches::capture_min_rows`), also
+/// before a failure, for the rank that stepped it to write: they never
+/// travel (a worker's reply arrives without them).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct GroupReply(pub(crate) Option<Result<GroupOutput, GroupFailure>>);
+pub struct GroupReply(
+    pub(crate) Option<Result<GroupOutput, GroupFailure>>,
+    #[serde(skip)] pub(crate) Vec<IslandTask>,
+);
 
 impl GroupReply {
     /// V-Clip tasks and island solves the group's step ran.

@@ -1,12 +1,11 @@
 //! One step of the whole world, as SPEC 2.1's frame loop: each stage a
 //! function of its own, in the order the step takes them.
 
-use super::check_states;
 use super::contact::SpinResolves;
 use super::executor::{Executor, GroupOutput, PairKey, Segment, Since};
 use super::group::{self, StepStart};
 use super::region::{PairMap, Region};
-use super::stats::{GroupWork, NumericalFailure};
+use super::stats::{GroupWork, NumericalFailure, check_states};
 use super::timers::Stage;
 use super::toi::SolvedSince;
 use super::touching::Touching;
@@ -60,7 +59,12 @@ pub(super) fn step_world(
             .collect(),
         body_cost: std::mem::take(&mut work.body_cost),
     };
-    let done = group::step_groups(w.st, w, &start, exec)?;
+    // What the groups' solves captured goes after the step-start solve's,
+    // also when one of them fails.
+    let mut captured = std::mem::take(&mut w.captured);
+    let done = group::step_groups(w.st, w, &start, exec, &mut captured);
+    w.captured = captured;
+    let done = done?;
     let runs = done.runs;
     work.body_cost = start.body_cost.clone();
     for g in &runs {

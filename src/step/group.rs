@@ -39,6 +39,7 @@ use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::{self, SphereProxy};
 use crate::collision::narrowphase::PairResult;
 use crate::contact::island::DisjointSets;
+use crate::contact::solver::IslandTask;
 use nalgebra::Vector3;
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -312,6 +313,7 @@ pub fn prepare_pairs(
         speculative_pushes: Default::default(),
         integrated: Default::default(),
         keep_answers: false,
+        captured: Vec::new(),
     };
     let separating: PairMap<Vector3<f64>> = input.separating.iter().cloned().collect();
     let since: SolvedSince = input.since.iter().cloned().collect();
@@ -363,7 +365,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
     let prepared_s = prepared.as_ref().map_or(0.0, |p| p.busy_s);
     let mut together = SolvedTogether::new(ids.len());
     together.record_islands(islands);
-    let region = Region {
+    let mut region = Region {
         st,
         ids,
         bodies,
@@ -378,6 +380,7 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         speculative_pushes: Default::default(),
         integrated: Default::default(),
         keep_answers: keep_paths,
+        captured: Vec::new(),
     };
     let state = GroupState {
         seg,
@@ -390,11 +393,11 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         prepared,
         keep_paths,
     };
-    let output = step_group(region, state, exec).map(|mut out| {
+    let output = step_group(&mut region, state, exec).map(|mut out| {
         out.busy_s = clock.elapsed().as_secs_f64() + prepared_s;
         out
     });
-    GroupReply(Some(output.map_err(GroupFailure::from)))
+    GroupReply(Some(output.map_err(GroupFailure::from)), region.captured)
 }
 
 /// Where a group's realised paths met what it did not hold.
@@ -710,6 +713,7 @@ fn paths_meet(
         speculative_pushes: Default::default(),
         integrated: Default::default(),
         keep_answers: false,
+        captured: Vec::new(),
     };
     let since: SolvedSince = start
         .since
@@ -756,12 +760,15 @@ fn paths_meet(
 /// Runs every group of the step and re-runs merged ones until no realised
 /// path leaves its group; returns the runs in group-id order. A large
 /// group is split first (`split_group`) and its parts' paths checked
-/// against each other (`check_parts`).
+/// against each other (`check_parts`). The islands the group steps
+/// captured here (`GroupReply`) are appended to `captured`, in the order
+/// of the replies, every round's (a run later merged away included).
 pub(crate) fn step_groups<'s>(
     st: &'s StepStatic<'s>,
     world: &Region<'s>,
     start: &StepStart,
     exec: &mut dyn Executor,
+    captured: &mut Vec<IslandTask>,
 ) -> Result<GroupsDone, NumericalFailure> {
     let n = world.bodies.len();
     let index = StartIndex {
@@ -872,7 +879,11 @@ pub(crate) fn step_groups<'s>(
                 input
             })
             .collect();
-        for (p, reply) in todo.into_iter().zip(exec.step_groups(st, &params, inputs)) {
+        let mut replies = exec.step_groups(st, &params, inputs);
+        for reply in &mut replies {
+            captured.append(&mut reply.1);
+        }
+        for (p, reply) in todo.into_iter().zip(replies) {
             let output = reply.0.expect("every group answered")?;
             runs[p] = Some(output);
         }

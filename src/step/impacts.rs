@@ -6,15 +6,26 @@
 use super::contact::{SolvedTogether, SpinResolves};
 use super::executor::{Executor, GroupOutput, PairKey, PreparedPairs, Segment, Since};
 use super::region::{PairMap, Region};
-use super::stats::NumericalFailure;
+use super::stats::{NumericalFailure, check_states};
 use super::timers::Stage;
 use super::toi::{Search, SolvedSince};
-use super::{EVENTS_PER_BODY, MAX_EARLIER_IMPACTS};
 use crate::body::{Activity, BodyState};
 use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
 use std::collections::{BTreeMap, BTreeSet};
+
+/// Impact events one body may take part in during a step (as one of an
+/// impact's two bodies) before the overlaps left on its pairs are accepted.
+/// The count is each body's own, not its group's, so what a group decides
+/// depends only on the bodies its events touch, and a group split into
+/// parts decides as it would whole. A body chattering against a wall or
+/// between two neighbours soon reaches it, while bodies landing in a pour
+/// take one or two events each.
+pub const EVENTS_PER_BODY: usize = 256;
+/// How many times an impact may give way to an earlier one found in its
+/// group (`Region::earlier_impact`) before it is taken as it is.
+const MAX_EARLIER_IMPACTS: usize = 8;
 
 /// An impact time ordered for the queue (finite, so `total_cmp` is the
 /// usual order).
@@ -281,8 +292,10 @@ pub(crate) struct GroupState {
 /// rolls the bodies that must move with it back to its instant τ, solves
 /// their contacts there, re-integrates them to the step's end and retests
 /// their pairs; the loop ends when no pair overlaps beyond what it carried.
+/// The region's state moves into the output; what it captured stays with
+/// the caller, also after a failure.
 pub(crate) fn step_group(
-    mut g: Region,
+    g: &mut Region,
     s: GroupState,
     exec: &mut dyn Executor,
 ) -> Result<GroupOutput, NumericalFailure> {
@@ -317,7 +330,7 @@ pub(crate) fn step_group(
     };
     let keys = prepared_toi.as_ref().map(|_| pairs.clone());
     let timer = g.stage.start(Stage::TimeOfImpact);
-    let mut book = PairBook::new(&g, &seg, &end, pairs, results);
+    let mut book = PairBook::new(g, &seg, &end, pairs, results);
     if let (Some(keys), Some(toi)) = (keys, prepared_toi) {
         book.known(&keys, toi);
     }
@@ -376,7 +389,7 @@ pub(crate) fn step_group(
             .collect::<Vec<_>>()
     };
     loop {
-        let violation = book.earliest(&mut g, &seg, h, &since, &accepted, exec);
+        let violation = book.earliest(g, &seg, h, &since, &accepted, exec);
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
         // rolls back and is solved as at an impact. Not before the
@@ -397,7 +410,7 @@ pub(crate) fn step_group(
         else {
             break;
         };
-        let exhausted = dynamic(&g, pair)
+        let exhausted = dynamic(g, pair)
             .iter()
             .any(|&i| events_of[i] >= EVENTS_PER_BODY);
         if spin_resolve {
@@ -437,7 +450,7 @@ pub(crate) fn step_group(
                 g.impact_group(exec, pair, tau, &book.partners, &seg, &solved_together);
         }
         let world_event = ((g.ids[pair.0 as usize], g.ids[pair.1 as usize]), tau);
-        let own = dynamic(&g, pair);
+        let own = dynamic(g, pair);
         if !own.is_empty() && own.iter().all(|&i| last_of[i] == Some(world_event)) {
             // No progress: keep the small overlap rather than stall the step.
             accepted.insert(pair);
@@ -452,7 +465,7 @@ pub(crate) fn step_group(
             for &i in &own {
                 events_of[i] += 1;
             }
-            let speed = approach_speed(&g, pair, &group_states, &group_pairs, &at_tau, &seg);
+            let speed = approach_speed(g, pair, &group_states, &group_pairs, &at_tau, &seg);
             g.counters.toi_events_by_approach[approach_band(speed, g.st.settings)] += 1;
             g.counters.count_event_rollback(group_states.len());
         }
@@ -461,7 +474,7 @@ pub(crate) fn step_group(
         // prediction ends its piece there.
         for &(i, state) in &group_states {
             if left[i] {
-                record(&g, &mut pieces, i, &seg[i].state, &state);
+                record(g, &mut pieces, i, &seg[i].state, &state);
             }
             left[i] = true;
             seg[i].state = state;
@@ -493,7 +506,7 @@ pub(crate) fn step_group(
                 paths[i].push(seg[i]);
             }
         }
-        super::check_states(
+        check_states(
             members.iter().map(|&i| (g.ids[i] as usize, &seg[i].state)),
             "solve_islands",
             t0 + tau,
@@ -509,9 +522,9 @@ pub(crate) fn step_group(
         let broadphase = g.stage.start(Stage::Broadphase);
         for &i in &members {
             book.forget(i);
-            book.sweep(&g, i, &seg, &end);
+            book.sweep(g, i, &seg, &end);
         }
-        let redo = book.candidates(&g, &members);
+        let redo = book.candidates(g, &members);
         g.counters.candidate_pairs += redo.len() as u64;
         g.stage.stop(broadphase);
         let redone = g.narrowphase_skipping_separating(exec, &redo, &end, &separating);
@@ -521,7 +534,7 @@ pub(crate) fn step_group(
     }
     for i in 0..n {
         if left[i] {
-            record(&g, &mut pieces, i, &seg[i].state, &end[i]);
+            record(g, &mut pieces, i, &seg[i].state, &end[i]);
         }
     }
     g.counters.toi_events += events as u64;
@@ -536,19 +549,20 @@ pub(crate) fn step_group(
         .filter(|&i| left[i])
         .map(|i| (g.ids[i], std::mem::take(&mut paths[i])))
         .collect();
+    use std::mem::take;
     Ok(GroupOutput {
         paths,
-        ids: g.ids,
-        bodies: g.bodies,
-        sleep_timer: g.sleep_timer,
+        ids: take(&mut g.ids),
+        bodies: take(&mut g.bodies),
+        sleep_timer: take(&mut g.sleep_timer),
         end,
         pairs,
         results,
-        warm: g.warm.into_iter().collect(),
-        impacts: g.impacts,
-        pair_forces: g.pair_forces.into_iter().collect(),
-        counters: g.counters,
-        stage: g.stage,
+        warm: take(&mut g.warm).into_iter().collect(),
+        impacts: take(&mut g.impacts),
+        pair_forces: take(&mut g.pair_forces).into_iter().collect(),
+        counters: take(&mut g.counters),
+        stage: take(&mut g.stage),
         events: events as u64,
         pieces,
         busy_s: 0.0,

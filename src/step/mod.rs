@@ -47,6 +47,7 @@ pub use executor::{
     StepStatic,
 };
 pub use group::{SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group};
+pub use impacts::EVENTS_PER_BODY;
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
 pub use stats::{Counters, NumericalFailure};
 pub use switches::{GROUP_MARGIN, StepSwitches};
@@ -54,7 +55,7 @@ pub use timers::{Stage, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
 pub(crate) use touching::{Touching, WarmContact};
 
-use crate::body::{Activity, Body, BodyId, BodyKind, BodyState, ObjectDef};
+use crate::body::{Activity, Body, BodyId, BodyKind, ObjectDef};
 use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
@@ -148,18 +149,6 @@ impl Executor for Inline {
     }
 }
 
-/// Impact events one body may take part in during a step (as one of an
-/// impact's two bodies) before the overlaps left on its pairs are accepted.
-/// The count is each body's own, not its group's, so what a group decides
-/// depends only on the bodies its events touch, and a group split into
-/// parts decides as it would whole. A body chattering against a wall or
-/// between two neighbours soon reaches it, while bodies landing in a pour
-/// take one or two events each.
-pub const EVENTS_PER_BODY: usize = 256;
-/// How many times an impact may give way to an earlier one found in its
-/// group (`Region::earlier_impact`) before it is taken as it is.
-pub(crate) const MAX_EARLIER_IMPACTS: usize = 8;
-
 /// A body that fell below `fall_z`, and when: the end of the step that
 /// found it there (`summary.json`'s `fallen`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -201,6 +190,11 @@ pub struct World {
     pub last_pair_forces: Vec<(BodyId, BodyId, f64)>,
     /// Resting forces of the last solve of each touching pair (warm start).
     pub(crate) warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
+    /// Copies of the islands the last step built of
+    /// `switches.capture_min_rows` rows or more, in the order it built them
+    /// (those of the group steps run on this rank included), for the caller
+    /// to write (`--capture-islands`); empty unless asked for.
+    pub captured_islands: Vec<IslandTask>,
 }
 
 impl World {
@@ -225,6 +219,7 @@ impl World {
             last_normal_force_sum: 0.0,
             last_pair_forces: Vec::new(),
             warm: BTreeMap::new(),
+            captured_islands: Vec::new(),
         }
     }
 
@@ -287,6 +282,7 @@ impl World {
             speculative_pushes: Default::default(),
             integrated: Default::default(),
             keep_answers: false,
+            captured: Vec::new(),
         };
         let first = self.steps == 0;
         let fallen_before = world.counters.bodies_fallen;
@@ -309,6 +305,7 @@ impl World {
         self.counters = world.counters;
         self.stage = world.stage;
         self.impacts = world.impacts;
+        self.captured_islands = world.captured;
         self.last_normal_force_sum = world.pair_forces.values().sum();
         self.last_pair_forces = world
             .pair_forces
@@ -358,35 +355,4 @@ impl World {
     pub fn world_point(&self, body: usize, local: Vector3<f64>) -> Vector3<f64> {
         (self.bodies[body].pose() * Point3::from(local)).coords
     }
-}
-/// Stops the run when a state is non-finite or faster than `MAX_SPEED`,
-/// naming the stage that produced it: `solve_islands` right after a
-/// contact solve (impulses), `integrate` at the end of the step (forces,
-/// including a scene's own `[[forces]]`, acting over it). `states` are
-/// (world id, state).
-pub(crate) fn check_states<'a>(
-    states: impl Iterator<Item = (usize, &'a BodyState)>,
-    stage: &'static str,
-    t: f64,
-) -> Result<(), NumericalFailure> {
-    for (i, s) in states {
-        let finite = s.position.iter().all(|x| x.is_finite())
-            && s.velocity.iter().all(|x| x.is_finite())
-            && s.angular_momentum.iter().all(|x| x.is_finite())
-            && s.orientation.coords.iter().all(|x| x.is_finite());
-        let detail = if !finite {
-            "has a non-finite state".to_string()
-        } else if s.velocity.norm() > MAX_SPEED {
-            format!("exploded (speed {:.3e} m/s)", s.velocity.norm())
-        } else {
-            continue;
-        };
-        return Err(NumericalFailure {
-            body: BodyId(i as u32),
-            stage,
-            time: t,
-            detail,
-        });
-    }
-    Ok(())
 }

@@ -17,6 +17,7 @@ use crate::collision::broadphase::{self, SphereProxy};
 use crate::collision::narrowphase::{
     self, CONTACT_TOLERANCE, CachedFeatures, NEAR_FROM, PairResult, PairTask,
 };
+use crate::contact::solver::IslandTask;
 use crate::dynamics::integrate::integrate;
 use crate::math;
 use nalgebra::{Isometry3, Vector3};
@@ -60,6 +61,9 @@ pub(crate) struct Region<'s> {
     /// for a later run of the same events (`super::kept`): a part of a
     /// split group, which may step again merged with the parts it met.
     pub keep_answers: bool,
+    /// Copies of the islands it built of `StepSwitches::capture_min_rows`
+    /// rows or more, in the order it built them (empty unless asked for).
+    pub captured: Vec<IslandTask>,
 }
 
 /// A pile's group step asks for hundreds of thousands of integrations,

@@ -1,10 +1,12 @@
 //! What a run counts and measures besides its stage seconds (`timers`):
 //! the work it did and skipped, per rank, and how its stages were
-//! distributed. A leaf module: `step` fills these in and `output` writes
-//! them.
+//! distributed, and the numerical failure that stops a run
+//! (`check_states`). A leaf module: `step` fills these in and `output`
+//! writes them.
 
-use crate::body::BodyId;
+use crate::body::{BodyId, BodyState};
 use crate::contact::solver::SolveStats;
+use crate::scene::bounds::MAX_SPEED;
 use serde::{Deserialize, Serialize};
 
 /// What the simulator did and what it skipped, counted over the run.
@@ -151,6 +153,38 @@ impl std::fmt::Display for NumericalFailure {
             self.time, self.stage, self.body.0, self.detail
         )
     }
+}
+
+/// Stops the run when a state is non-finite or faster than `MAX_SPEED`,
+/// naming the stage that produced it: `solve_islands` right after a
+/// contact solve (impulses), `integrate` at the end of the step (forces,
+/// including a scene's own `[[forces]]`, acting over it). `states` are
+/// (world id, state).
+pub(crate) fn check_states<'a>(
+    states: impl Iterator<Item = (usize, &'a BodyState)>,
+    stage: &'static str,
+    t: f64,
+) -> Result<(), NumericalFailure> {
+    for (i, s) in states {
+        let finite = s.position.iter().all(|x| x.is_finite())
+            && s.velocity.iter().all(|x| x.is_finite())
+            && s.angular_momentum.iter().all(|x| x.is_finite())
+            && s.orientation.coords.iter().all(|x| x.is_finite());
+        let detail = if !finite {
+            "has a non-finite state".to_string()
+        } else if s.velocity.norm() > MAX_SPEED {
+            format!("exploded (speed {:.3e} m/s)", s.velocity.norm())
+        } else {
+            continue;
+        };
+        return Err(NumericalFailure {
+            body: BodyId(i as u32),
+            stage,
+            time: t,
+            detail,
+        });
+    }
+    Ok(())
 }
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

@@ -34,6 +34,12 @@ pub struct StepSwitches {
     /// answers where the parts meet nothing else, more work on one rank,
     /// smaller units to share over many.
     pub split_groups: bool,
+    /// Keeps a copy of every contact island of this many rows or more
+    /// that the step builds, in the order it builds them
+    /// (`World::captured_islands`, `GroupReply`), for the caller to write
+    /// (`--capture-islands`); `None` (the default): none is kept. Changes
+    /// no result.
+    pub capture_min_rows: Option<usize>,
 }
 
 impl Default for StepSwitches {
@@ -46,6 +52,7 @@ impl Default for StepSwitches {
             iterative_min_rows: crate::contact::solver::ITERATIVE_MIN_ROWS,
             group_margin: GROUP_MARGIN,
             split_groups: false,
+            capture_min_rows: None,
         }
     }
 }
