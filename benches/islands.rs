@@ -2,8 +2,8 @@
 //! task of a folder, as the simulator would solve it).
 //!
 //! A capture is a folder of files, one `IslandTask` each, bincode
-//! (`bincode::config::standard()`, serde). `RIGIDSIM_CAPTURE_ISLANDS=DIR`
-//! makes a run write every island of `CAPTURE_MIN_ROWS` rows or more it
+//! (`bincode::config::standard()`, serde). `rigidsim --capture-islands DIR`
+//! makes a run write every island of `--capture-min-rows` rows or more it
 //! solves there (see `output::capture`); `tests/data/islands/` holds a few.
 //!
 //! Run: `cargo bench --bench islands -- [DIR]` (default `tests/data/islands`);
