@@ -567,6 +567,14 @@ impl<'a> IterativeSystem<'a> {
         }
     }
 
+    /// Whether row i is strictly inside its bounds (it pushes, or holds
+    /// friction short of its bound): the rows the subspace step solves
+    /// together.
+    pub(super) fn is_free(&self, i: usize, s: &IterativeState) -> bool {
+        let (l, h) = self.bounds(i, &s.p);
+        self.diag[i] > 1e-300 && s.p[i] > l && s.p[i] < h
+    }
+
     /// w_i = (A p + b)_i + c·A_ii·p_i.
     #[inline]
     pub(super) fn velocity(&self, i: usize, s: &IterativeState) -> f64 {

@@ -1668,16 +1668,7 @@ impl LcpWorkspace {
             self.factor.dirty = true;
             return Ok(());
         }
-        let pivot = self
-            .factor
-            .checked_pivot(schur, self.floor)
-            .map_err(|detail| LcpError::Numerical {
-                size: self.n,
-                detail,
-            })?;
-        self.factor.append(&self.z, pivot);
-        self.clamped.push(d);
-        Ok(())
+        self.append_clamped(schur, d)
     }
 
     /// A not-clamped row k joins C: append its factor row, pivot Δa_k.
@@ -1726,6 +1717,13 @@ impl LcpWorkspace {
             self.z[r] = self.y[r] / self.factor.d(r);
         }
         let schur = row[k] - dot(&self.y[..m], &self.z[..m]);
+        self.append_clamped(schur, k)
+    }
+
+    /// Row `row` joins C at the factor's end: its pivot (the Schur
+    /// complement `schur`, checked against the floor) and the factor row
+    /// in `z`.
+    fn append_clamped(&mut self, schur: f64, row: usize) -> Result<(), LcpError> {
         let pivot = self
             .factor
             .checked_pivot(schur, self.floor)
@@ -1734,7 +1732,7 @@ impl LcpWorkspace {
                 detail,
             })?;
         self.factor.append(&self.z, pivot);
-        self.clamped.push(k);
+        self.clamped.push(row);
         Ok(())
     }
 

@@ -65,7 +65,8 @@ pub(crate) fn solve(
 ) -> PileAnswer {
     let mut state = system.warm_state(warm, bodies);
     let by_body = subspace::rows_by_body(system.rows, bodies);
-    let mut subspace_tries = SubspaceTries::new(settings);
+    let mut subspace_tries =
+        subspace::Tries::new(settings.subspace_steps, settings.subspace_rejections);
     let mut last_free = None;
     for sweep in 0..=settings.max_sweeps {
         if sweep % settings.check_every == 0 {
@@ -91,7 +92,7 @@ pub(crate) fn solve(
                         sweeps: sweep as u32,
                     };
                 }
-                subspace_tries.record(step);
+                subspace_tries.record(&step);
             }
         }
         if sweep < settings.max_sweeps {
@@ -105,44 +106,10 @@ pub(crate) fn solve(
     }
 }
 
-/// The subspace steps a solve has left.
-struct SubspaceTries {
-    left: usize,
-    rejected_in_a_row: usize,
-    rejections_allowed: usize,
-}
-
-impl SubspaceTries {
-    fn new(settings: &PileSweepSettings) -> Self {
-        SubspaceTries {
-            left: settings.subspace_steps,
-            rejected_in_a_row: 0,
-            rejections_allowed: settings.subspace_rejections,
-        }
-    }
-
-    fn may_try(&self) -> bool {
-        self.left > 0 && self.rejected_in_a_row < self.rejections_allowed
-    }
-
-    fn record(&mut self, step: Step) {
-        self.left -= 1;
-        match step {
-            Step::Kept => self.rejected_in_a_row = 0,
-            Step::Rejected => self.rejected_in_a_row += 1,
-            Step::NotTaken => {}
-        }
-    }
-}
-
-/// Which rows are strictly inside their bounds (they push, or hold
-/// friction short of their bound): the rows the subspace step solves
-/// together.
+/// Which rows are free (`IterativeSystem::is_free`): the rows the
+/// subspace step solves together.
 fn free_rows(system: &IterativeSystem, s: &IterativeState) -> Vec<bool> {
     (0..system.rows.len())
-        .map(|i| {
-            let (l, h) = system.bounds(i, &s.p);
-            system.diag[i] > 1e-300 && s.p[i] > l && s.p[i] < h
-        })
+        .map(|i| system.is_free(i, s))
         .collect()
 }

@@ -39,6 +39,38 @@ pub(super) fn rows_by_body(rows: &[Row], bodies: usize) -> Vec<Vec<usize>> {
     by_body
 }
 
+/// The subspace steps a solve has left: at most `steps`, and none after
+/// `rejections` rejected in a row.
+pub(crate) struct Tries {
+    left: usize,
+    rejected_in_a_row: usize,
+    rejections_allowed: usize,
+}
+
+impl Tries {
+    pub(crate) fn new(steps: usize, rejections: usize) -> Self {
+        Tries {
+            left: steps,
+            rejected_in_a_row: 0,
+            rejections_allowed: rejections,
+        }
+    }
+
+    pub(crate) fn may_try(&self) -> bool {
+        self.left > 0 && self.rejected_in_a_row < self.rejections_allowed
+    }
+
+    /// Counts a step taken, and what became of it.
+    pub(crate) fn record(&mut self, step: &Step) {
+        self.left -= 1;
+        match step {
+            Step::Kept => self.rejected_in_a_row = 0,
+            Step::Rejected => self.rejected_in_a_row += 1,
+            Step::NotTaken => {}
+        }
+    }
+}
+
 /// Solves the rows strictly inside their bounds together (see
 /// `subspace`), then projects onto the bounds in row order (a friction
 /// row's bound follows its normal row's new impulse). Kept only if it
@@ -54,12 +86,7 @@ pub(super) fn step(
     s: &mut IterativeState,
 ) -> Step {
     let m = system.rows.len();
-    let free: Vec<usize> = (0..m)
-        .filter(|&i| {
-            let (l, h) = system.bounds(i, &s.p);
-            system.diag[i] > 1e-300 && s.p[i] > l && s.p[i] < h
-        })
-        .collect();
+    let free: Vec<usize> = (0..m).filter(|&i| system.is_free(i, s)).collect();
     let residual: Vec<f64> = free.iter().map(|&i| system.velocity(i, s)).collect();
     let Some(step) = free_block_step(
         system.rows,

@@ -62,21 +62,19 @@ pub(crate) fn sequential_impulses(
     // the free rows it had (the stack of 50: half the sweeps, half the
     // solve time). Without one (an impact), the sweeps find them first.
     let warm_started = state.p.iter().any(|&x| x != 0.0);
-    let (mut steps_left, mut rejected_in_a_row) = (settings.subspace_steps, 0);
+    let mut tries = subspace::Tries::new(settings.subspace_steps, settings.subspace_rejections);
     for sweep in 0..max_sweeps {
         if sweep % settings.check_every == 0 {
             if system.met(&state) {
                 return (state.p, true, sweep as u32);
             }
             let may_step = sweep > 0 || warm_started;
-            if may_step && steps_left > 0 && rejected_in_a_row < settings.subspace_rejections {
-                steps_left -= 1;
-                match subspace::step(system, &by_body, &mut state) {
-                    Step::Kept if system.met(&state) => return (state.p, true, sweep as u32),
-                    Step::Kept => rejected_in_a_row = 0,
-                    Step::Rejected => rejected_in_a_row += 1,
-                    Step::NotTaken => {}
+            if may_step && tries.may_try() {
+                let step = subspace::step(system, &by_body, &mut state);
+                if matches!(step, Step::Kept) && system.met(&state) {
+                    return (state.p, true, sweep as u32);
                 }
+                tries.record(&step);
             }
         }
         system.sweep(&mut state);
