@@ -150,11 +150,16 @@ fn a_pour_ends_the_same_whatever_the_group_margin() {
     let rollback = reference.counters.toi_events_by_rollback;
     assert_eq!(rollback.iter().sum::<u64>(), reference.counters.toi_events);
     assert!(rollback[1..].iter().sum::<u64>() > 0, "{rollback:?}");
+    // Some events repair a touching pair (a rocking body's other corner
+    // landing); most are bodies meeting from apart.
+    let repairs = reference.counters.overlap_repairs;
+    assert!(repairs > 0 && 2 * repairs < reference.counters.toi_events);
     for margin in [0.02, rigidsim::step::GROUP_MARGIN, 1.0] {
         let w = run_with(margin);
         assert_eq!(w.state_hash(), reference.state_hash(), "margin {margin}");
         assert_eq!(w.counters.toi_events, reference.counters.toi_events);
         assert_eq!(w.counters.toi_events_by_rollback, rollback);
+        assert_eq!(w.counters.overlap_repairs, repairs);
         if margin == 1.0 {
             assert!(
                 w.counters.groups < reference.counters.groups,

@@ -57,6 +57,8 @@ fn a_slow_approach_is_solved_at_the_step_without_an_event() {
         // The exact model's event rolls back the cube alone.
         let rollback = [events, 0, 0, 0, 0];
         assert_eq!(w.counters.toi_events_by_rollback, rollback, "dial {dial}");
+        // It met the floor from apart: no overlap of a touching pair.
+        assert_eq!(w.counters.overlap_repairs, 0, "dial {dial}");
         // The speculative contact pushed, and the pair ended touching.
         let pushes = u64::from(dial > 0.0);
         assert_eq!(w.counters.speculative_pushes, pushes, "dial {dial}");

@@ -54,8 +54,9 @@ pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// 12: the contact model's dial. 13: contact patches (a pair's points are
 /// its patches' hull vertices, so a run resumed by an older build would
 /// differ), `Counters::points_per_pair`, `speculative_pushes` and
-/// `speculative_ghosts`. 14: `Counters::toi_events_by_rollback`.
-pub const FORMAT: u32 = 14;
+/// `speculative_ghosts`. 14: `Counters::toi_events_by_rollback`. 15:
+/// `Counters::overlap_repairs`.
+pub const FORMAT: u32 = 15;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";

@@ -322,10 +322,13 @@ pub(crate) struct Segment {
 }
 
 /// When a pair's contacts were last solved (the step's start, or an
-/// impact's τ, seconds into the step) and its deepest overlap then
-/// (`toi::SolvedSince`).
+/// impact's τ, seconds into the step), its deepest overlap then
+/// (`toi::SolvedSince`), and whether it had contact points then (not only
+/// near points): an impact of such a pair repairs an overlap
+/// (`Counters::overlap_repairs`).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub(crate) struct Since {
     pub time: f64,
     pub deepest: f64,
+    pub touched: bool,
 }

@@ -165,7 +165,12 @@ fn solve_touching(
         .iter()
         .map(|t| {
             let deepest = t.points.iter().map(|p| -p.separation).fold(0.0, f64::max);
-            ((t.a.0, t.b.0), Since { time: 0.0, deepest })
+            let since = Since {
+                time: 0.0,
+                deepest,
+                touched: !t.points.is_empty(),
+            };
+            ((t.a.0, t.b.0), since)
         })
         .collect();
     let all_moving: Vec<usize> = (0..w.bodies.len()).filter(|&i| w.moving(i)).collect();

@@ -468,6 +468,9 @@ pub(crate) fn step_group(
             let speed = approach_speed(g, pair, &group_states, &group_pairs, &at_tau, &seg);
             g.counters.toi_events_by_approach[approach_band(speed, g.st.settings)] += 1;
             g.counters.count_event_rollback(group_states.len());
+            if since.get(&pair).is_some_and(|s| s.touched) {
+                g.counters.overlap_repairs += 1;
+            }
         }
         let rolled: Vec<usize> = group_states.iter().map(|&(i, _)| i).collect();
         // Roll the bodies back to τ; a path that had already left its
@@ -486,7 +489,8 @@ pub(crate) fn step_group(
         }
         for (k, r) in group_pairs.iter().zip(&at_tau) {
             let deepest = if r.penetrating { r.depth } else { 0.0 };
-            since.insert(*k, Since { time: tau, deepest });
+            let touched = !r.contacts.is_empty();
+            since.insert(*k, Since { time: tau, deepest, touched });
         }
         let touching_now = g.touching_from(&group_pairs, &at_tau);
         let woken = g.wake_touched(&touching_now, &mut seg, tau, t0);

@@ -36,6 +36,13 @@ pub struct Counters {
     /// pile rolls back the pile (its contact island), and each costs the
     /// pile's contact solve.
     pub toi_events_by_rollback: [u64; 5],
+    /// Impact events on a pair that had contact points when it was last
+    /// solved in the step (at its start or at an earlier event): a point
+    /// sank past what the pair carried (a rocking body's other corner
+    /// landing, an overlap a speculative contact let through), and the
+    /// roll-back repaired it. The rest of `toi_events` are pairs that met
+    /// from apart (or from near points only).
+    pub overlap_repairs: u64,
     pub toi_bisection_queries: u64,
     /// Impacts found at another impact's instant, in a pair that had begun
     /// to overlap before it unseen (see `Region::earlier_impact`).
@@ -120,6 +127,7 @@ impl Counters {
         {
             *x += y;
         }
+        self.overlap_repairs += o.overlap_repairs;
         self.toi_bisection_queries += o.toi_bisection_queries;
         self.toi_missed_overlaps += o.toi_missed_overlaps;
         self.spin_resolves += o.spin_resolves;

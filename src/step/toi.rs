@@ -340,6 +340,7 @@ impl Region<'_> {
         let Some(Since {
             time: t0,
             deepest: carried,
+            ..
         }) = since
         else {
             return r.depth - allowed_depth(0.0);
