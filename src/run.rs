@@ -28,7 +28,7 @@ pub struct RunOptions {
     pub no_progress: bool,
     pub no_sleep: bool,
     /// Split large interaction groups into the parts that interact within
-    /// a step (`StepSwitches::split_groups`).
+    /// a step (`StepSettings::split_groups`).
     pub split_groups: bool,
     /// Write `checkpoint.bin` every this many simulated seconds (and at the end).
     pub checkpoint_every: Option<f64>,
@@ -226,8 +226,8 @@ pub fn run_driven(
     let (mut world, marks, mut traj, continued) = match resume {
         None => {
             let mut world = World::new(scene);
-            world.switches.sleep_enabled = !opts.no_sleep;
-            world.switches.split_groups = opts.split_groups;
+            world.settings.sleep_enabled = !opts.no_sleep;
+            world.settings.split_groups = opts.split_groups;
             let traj = TrajectoryWriter::create(&traj_path, marking)
                 .map_err(|e| io(e, "trajectory.csv"))?;
             (world, None, traj, Continued::New)
@@ -242,7 +242,7 @@ pub fn run_driven(
             ));
             last_good = Some((ck.source().to_path_buf(), time));
             let mut world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
-            world.switches.split_groups = opts.split_groups;
+            world.settings.split_groups = opts.split_groups;
             let (traj, continued) =
                 TrajectoryWriter::resume(&traj_path, marks.trajectory, time, marking)
                     .map_err(|e| io(e, &traj_path.display().to_string()))?;
@@ -250,7 +250,7 @@ pub fn run_driven(
         }
     };
     // `--capture-islands`: the step keeps the islands, written after it.
-    world.switches.capture_min_rows = capture::min_rows();
+    world.settings.capture_min_rows = capture::min_rows();
     let checkpoint_path = out_dir.join(checkpoint::FILE_NAME);
     let checkpoint_stride = opts
         .checkpoint_every

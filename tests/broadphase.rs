@@ -170,7 +170,7 @@ fn separating_pair_skip_changes_no_result_and_fires() {
         let run = |skip: bool| {
             let scene = rigidsim::scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
             let mut w = World::new(scene);
-            w.switches.skip_separating = skip;
+            w.settings.skip_separating = skip;
             let mut exec = Inline::default();
             while w.time() < seconds - 1e-9 {
                 w.step(&mut exec).unwrap();

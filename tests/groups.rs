@@ -130,7 +130,7 @@ fn a_pour_ends_the_same_whatever_the_group_margin() {
     let scene = pour_with_late_bodies();
     let run_with = |margin: f64| {
         let mut w = world(&scene);
-        w.switches.group_margin = margin;
+        w.settings.group_margin = margin;
         run_until(&mut w, &mut Inline::default(), 2.2);
         w
     };
@@ -179,7 +179,7 @@ fn a_pour_ends_the_same_with_its_groups_split() {
     let scene = pour_with_late_bodies();
     let run_with = |split: bool| {
         let mut w = world(&scene);
-        w.switches.split_groups = split;
+        w.settings.split_groups = split;
         run_until(&mut w, &mut Inline::default(), 2.2);
         w
     };

@@ -373,7 +373,7 @@ fn resting_cube_neither_drifts_nor_sinks_and_carries_its_weight() {
         position = [0.3, -0.2, 0.1]
         "#
     ));
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     let start = w.bodies[1].state.position;
     let mut exec = Inline::default();
     while w.time() < 10.0 - 1e-9 {
@@ -413,7 +413,7 @@ fn stack(masses: &[f64], sleep: bool) -> rigidsim::step::World {
         ));
     }
     let mut w = world(&s);
-    w.switches.sleep_enabled = sleep;
+    w.settings.sleep_enabled = sleep;
     w
 }
 
@@ -495,7 +495,7 @@ fn tilted(mu: f64, downhill: Vector3<f64>) -> rigidsim::step::World {
         "#,
         g.x, g.y, g.z
     ));
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     w
 }
 
@@ -890,7 +890,7 @@ fn single_frictionless_contact_uses_the_closed_form() {
         position = [0.0, 0.0, 0.3]
         "#
     ));
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     run_until(&mut w, &mut Inline::default(), 0.2);
     assert!(w.counters.solve.closed_form_solves > 0);
 }

@@ -186,7 +186,7 @@ fn stack(masses: &[f64]) -> World {
         s += &body(&format!("c{i}"), [0.0, 0.0, 0.1 + 0.2 * i as f64], "");
     }
     let mut w = world(&s);
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     w
 }
 
@@ -268,8 +268,8 @@ fn stack_solved_iteratively_holds_warm_or_cold() {
     let n = 20;
     let iterative = |warm: bool| {
         let mut w = stack(&vec![1.0; n]);
-        w.switches.warm_start = warm;
-        w.switches.iterative_min_rows = 100;
+        w.settings.warm_start = warm;
+        w.settings.iterative_min_rows = 100;
         w
     };
     let run = |warm: bool| {
@@ -316,7 +316,7 @@ fn stack_solved_iteratively_holds_warm_or_cold() {
         assert_penetration(w, CONTACT_TOLERANCE, start);
     }
     let mut resumed = World::restore(iterative(true).scene, half).unwrap();
-    resumed.switches.iterative_min_rows = 100;
+    resumed.settings.iterative_min_rows = 100;
     let mut exec = Inline::default();
     while resumed.steps < warm.steps {
         resumed.step(&mut exec).unwrap();
@@ -342,7 +342,7 @@ fn pyramid() -> World {
         }
     }
     let mut w = world(&s);
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     w
 }
 
@@ -767,7 +767,7 @@ fn box_pushed_into_a_corner_stays_there() {
             ),
         );
         let mut w = world(&text);
-        w.switches.sleep_enabled = false;
+        w.settings.sleep_enabled = false;
         let mut exec = Inline::default();
         let mut watch = Watch::new(&w);
         while w.time() < 3.0 - 1e-9 {

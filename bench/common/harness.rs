@@ -53,7 +53,7 @@ pub struct Rigidsim {
 impl Rigidsim {
     pub fn new(scene: Scene, resting_systems: bool) -> Rigidsim {
         let mut world = World::new(scene);
-        world.switches.sleep_enabled = resting_systems;
+        world.settings.sleep_enabled = resting_systems;
         Rigidsim {
             world,
             exec: Inline::default(),

@@ -302,7 +302,7 @@ impl Hands {
 pub fn reset(world: &mut World) {
     let mut fresh = World::new(world.scene.clone());
     fresh.steps = world.steps;
-    fresh.switches = world.switches;
+    fresh.settings = world.settings;
     fresh.stage = std::mem::take(&mut world.stage);
     fresh.counters = std::mem::take(&mut world.counters);
     fresh.max_penetration = world.max_penetration;

@@ -184,8 +184,8 @@ impl World {
             counters: self.counters.clone(),
             max_penetration: self.max_penetration,
             fallen: self.fallen.clone(),
-            sleep_enabled: self.switches.sleep_enabled,
-            sleep_after: self.switches.sleep_after,
+            sleep_enabled: self.settings.sleep_enabled,
+            sleep_after: self.settings.sleep_after,
             touching: self.touching.clone(),
             features,
             sleep_timer: self.sleep_timer.clone(),
@@ -212,8 +212,8 @@ impl World {
         w.counters = ck.counters;
         w.max_penetration = ck.max_penetration;
         w.fallen = ck.fallen;
-        w.switches.sleep_enabled = ck.sleep_enabled;
-        w.switches.sleep_after = ck.sleep_after;
+        w.settings.sleep_enabled = ck.sleep_enabled;
+        w.settings.sleep_after = ck.sleep_after;
         w.touching = ck.touching;
         w.features = ck.features.into_iter().collect();
         w.sleep_timer = ck.sleep_timer;

@@ -47,7 +47,7 @@ pub(super) fn step_world(
         seg: solved.seg,
         end,
         pairs,
-        grown: grow(proxies, w.st.switches.group_margin),
+        grown: grow(proxies, w.st.step_settings.group_margin),
         since: solved.since,
         separating: solved.separating,
         together: solved.together,

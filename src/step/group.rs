@@ -797,7 +797,7 @@ pub(crate) fn step_groups<'s>(
     let whole = plan_groups(world, start);
     // `--split-groups` splits them all; otherwise the executor chooses
     // (and measures its choice).
-    let chosen = if st.switches.split_groups {
+    let chosen = if st.step_settings.split_groups {
         vec![true; whole.len()]
     } else {
         exec.split_groups(

@@ -343,7 +343,7 @@ pub(crate) fn step_group(
             s.as_ref().map(|(s, _, _)| {
                 s.iter()
                     .map(|p| SphereProxy {
-                        radius: p.radius * (1.0 + g.st.switches.group_margin),
+                        radius: p.radius * (1.0 + g.st.step_settings.group_margin),
                         ..*p
                     })
                     .collect()

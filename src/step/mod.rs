@@ -33,9 +33,9 @@ mod group;
 mod impacts;
 mod kept;
 mod region;
+mod settings;
 mod sleep;
 pub mod stats;
-mod switches;
 mod timers;
 mod toi;
 mod touching;
@@ -48,9 +48,9 @@ pub use executor::{
 };
 pub use group::{SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group};
 pub use impacts::EVENTS_PER_BODY;
+pub use settings::{GROUP_MARGIN, StepSettings};
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
 pub use stats::{Counters, NumericalFailure};
-pub use switches::{GROUP_MARGIN, StepSwitches};
 pub use timers::{Stage, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
 pub(crate) use touching::{Touching, WarmContact};
@@ -171,8 +171,8 @@ pub struct World {
     /// The bodies that fell below `fall_z`, in the order they fell (by
     /// body id within a step).
     pub fallen: Vec<Fall>,
-    /// How the run asks the step to work (`StepSwitches`).
-    pub switches: StepSwitches,
+    /// How the run asks the step to work (`StepSettings`).
+    pub settings: StepSettings,
     pub(crate) touching: Vec<Touching>,
     /// Contacts of the impacts solved during the last step, for the
     /// separating-pair skip (only an optimisation: not checkpointed).
@@ -191,7 +191,7 @@ pub struct World {
     /// Resting forces of the last solve of each touching pair (warm start).
     pub(crate) warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
     /// Copies of the islands the last step built of
-    /// `switches.capture_min_rows` rows or more, in the order it built them
+    /// `settings.capture_min_rows` rows or more, in the order it built them
     /// (those of the group steps run on this rank included), for the caller
     /// to write (`--capture-islands`); empty unless asked for.
     pub captured_islands: Vec<IslandTask>,
@@ -209,7 +209,7 @@ impl World {
             counters: Counters::default(),
             max_penetration: 0.0,
             fallen: Vec::new(),
-            switches: StepSwitches::default(),
+            settings: StepSettings::default(),
             touching: Vec::new(),
             impacts: Vec::new(),
             group_work: GroupWork::new(n),
@@ -265,7 +265,7 @@ impl World {
     pub fn step(&mut self, exec: &mut dyn Executor) -> Result<(), NumericalFailure> {
         let t0 = self.time();
         let n = self.bodies.len();
-        let st = GroupParams::new(t0, self.switches).statics(&self.scene);
+        let st = GroupParams::new(t0, self.settings).statics(&self.scene);
         use std::mem::take;
         let mut world = Region {
             st: &st,

@@ -61,7 +61,7 @@ pub(crate) struct Region<'s> {
     /// for a later run of the same events (`super::kept`): a part of a
     /// split group, which may step again merged with the parts it met.
     pub keep_answers: bool,
-    /// Copies of the islands it built of `StepSwitches::capture_min_rows`
+    /// Copies of the islands it built of `StepSettings::capture_min_rows`
     /// rows or more, in the order it built them (empty unless asked for).
     pub captured: Vec<IslandTask>,
 }
@@ -252,7 +252,7 @@ impl<'s> Region<'s> {
         touching: &[Touching],
         seg: &[Segment],
     ) -> PairMap<Vector3<f64>> {
-        if !self.st.switches.skip_separating {
+        if !self.st.step_settings.skip_separating {
             return PairMap::default();
         }
         let velocity_at = |i: usize, p: &Vector3<f64>| self.point_velocity(i, &seg[i].state, p);
