@@ -67,7 +67,7 @@ impl Engine for Rigidsim {
     }
     fn snaps(&self, out: &mut Vec<Snap>) {
         out.clear();
-        for (i, b) in self.world.bodies.iter().enumerate() {
+        for (i, b) in self.world.state.bodies.iter().enumerate() {
             out.push(Snap {
                 position: b.state.position,
                 orientation: b.state.orientation,

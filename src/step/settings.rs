@@ -39,7 +39,7 @@ pub struct StepSettings {
     pub split_groups: bool,
     /// Keeps a copy of every contact island of this many rows or more
     /// that the step builds, in the order it builds them
-    /// (`World::captured_islands`, `GroupReply`), for the caller to write
+    /// (`Diagnostics::captured_islands`, `GroupReply`), for the caller to write
     /// (`--capture-islands`); `None` (the default): none is kept. Changes
     /// no result.
     pub capture_min_rows: Option<usize>,
