@@ -179,7 +179,7 @@ fn solve_touching(
     )?;
     // Pairs touching now or hit during the last step ("colliding in the
     // previous frame") that now separate.
-    let previous_impacts = std::mem::take(&mut w.impacts);
+    let previous_impacts = std::mem::take(w.impacts);
     let mut separating = w.separating_pairs(&previous_impacts, &seg);
     separating.extend(w.separating_pairs(touching, &seg));
     Ok(SolvedStart {

@@ -182,7 +182,8 @@ pub struct WorldState {
     pub(crate) impacts: Vec<Touching>,
     /// V-Clip's cached closest features per pair (warm starts of queries).
     pub(crate) features: region::PairMap<Vec<CachedFeatures>>,
-    /// Seconds each body has been slow (it rests after `sleep_after`).
+    /// Seconds each body has been slow (it may rest after
+    /// `StepSettings::sleep_after`).
     pub(crate) sleep_timer: Vec<f64>,
     /// Resting system a sleeping body belongs to (its lowest body id).
     pub(crate) sleep_group: Vec<u32>,
@@ -298,32 +299,31 @@ impl World {
         })
     }
 
-    /// Advances the world by one step of `dt`.
+    /// Advances the world by one step of `dt`. The world-wide stages
+    /// borrow its state; also after a numerical failure the world keeps
+    /// what the step left (the states are those before the failing stage).
     pub fn step(&mut self, exec: &mut dyn Executor) -> Result<(), NumericalFailure> {
-        let t0 = self.time();
+        let st = GroupParams::new(self.time(), self.settings).statics(&self.scene);
         let (s, d) = (&mut self.state, &mut self.diagnostics);
-        let n = s.bodies.len();
-        let st = GroupParams::new(t0, self.settings).statics(&self.scene);
-        use std::mem::take;
+        let first = s.steps == 0;
+        let fallen_before = d.counters.bodies_fallen;
         let mut world = Region {
             st: &st,
-            ids: (0..n as u32).collect(),
-            bodies: take(&mut s.bodies),
-            features: take(&mut s.features),
-            warm: take(&mut s.warm),
-            sleep_timer: take(&mut s.sleep_timer),
-            sleep_group: take(&mut s.sleep_group),
-            counters: take(&mut d.counters),
-            stage: take(&mut d.stage),
-            impacts: take(&mut s.impacts),
+            ids: (0..s.bodies.len() as u32).collect(),
+            bodies: &mut s.bodies,
+            features: &mut s.features,
+            warm: &mut s.warm,
+            sleep_timer: &mut s.sleep_timer,
+            sleep_group: &mut s.sleep_group,
+            impacts: &mut s.impacts,
+            counters: &mut d.counters,
+            stage: &mut d.stage,
             pair_forces: BTreeMap::new(),
-            speculative_pushes: Default::default(),
+            speculative_pushes: BTreeSet::new(),
             integrated: Default::default(),
             keep_answers: false,
             captured: Vec::new(),
         };
-        let first = s.steps == 0;
-        let fallen_before = world.counters.bodies_fallen;
         let result = frame::step_world(
             &mut world,
             &mut s.touching,
@@ -333,20 +333,14 @@ impl World {
             &mut s.steps,
             &mut d.group_work,
         );
-        // Back into the world, also after a numerical failure (the run
-        // keeps what it has: the states are those before the failing stage).
-        s.bodies = world.bodies;
-        s.features = world.features;
-        s.warm = world.warm;
-        s.sleep_timer = world.sleep_timer;
-        s.sleep_group = world.sleep_group;
-        d.counters = world.counters;
-        d.stage = world.stage;
-        s.impacts = world.impacts;
-        d.captured_islands = world.captured;
-        d.last_normal_force_sum = world.pair_forces.values().sum();
-        d.last_pair_forces = world
-            .pair_forces
+        let Region {
+            pair_forces,
+            captured,
+            ..
+        } = world;
+        d.captured_islands = captured;
+        d.last_normal_force_sum = pair_forces.values().sum();
+        d.last_pair_forces = pair_forces
             .into_iter()
             .map(|((a, b), f)| (a, b, f))
             .collect();
