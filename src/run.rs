@@ -28,7 +28,7 @@ pub struct RunOptions {
     pub no_progress: bool,
     pub no_sleep: bool,
     /// Split large interaction groups into the parts that interact within
-    /// a step (`StepSwitches::split_groups`).
+    /// a step (`StepSettings::split_groups`).
     pub split_groups: bool,
     /// Write `checkpoint.bin` every this many simulated seconds (and at the end).
     pub checkpoint_every: Option<f64>,
@@ -95,6 +95,7 @@ pub fn frame_of(world: &World, index: u64, first_index: u64) -> Frame {
         first_index,
         time: world.time(),
         poses: world
+            .state
             .bodies
             .iter()
             .map(|b| {
@@ -226,8 +227,8 @@ pub fn run_driven(
     let (mut world, marks, mut traj, continued) = match resume {
         None => {
             let mut world = World::new(scene);
-            world.switches.sleep_enabled = !opts.no_sleep;
-            world.switches.split_groups = opts.split_groups;
+            world.settings.sleep_enabled = !opts.no_sleep;
+            world.settings.split_groups = opts.split_groups;
             let traj = TrajectoryWriter::create(&traj_path, marking)
                 .map_err(|e| io(e, "trajectory.csv"))?;
             (world, None, traj, Continued::New)
@@ -242,7 +243,7 @@ pub fn run_driven(
             ));
             last_good = Some((ck.source().to_path_buf(), time));
             let mut world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
-            world.switches.split_groups = opts.split_groups;
+            world.settings.split_groups = opts.split_groups;
             let (traj, continued) =
                 TrajectoryWriter::resume(&traj_path, marks.trajectory, time, marking)
                     .map_err(|e| io(e, &traj_path.display().to_string()))?;
@@ -250,7 +251,7 @@ pub fn run_driven(
         }
     };
     // `--capture-islands`: the step keeps the islands, written after it.
-    world.switches.capture_min_rows = capture::min_rows();
+    world.settings.capture_min_rows = capture::min_rows();
     let checkpoint_path = out_dir.join(checkpoint::FILE_NAME);
     let checkpoint_stride = opts
         .checkpoint_every
@@ -299,13 +300,13 @@ pub fn run_driven(
     // finds (which already holds the rows up to the checkpoint) or, in a new
     // folder, starts it at the checkpoint's time.
     if continued == Continued::New {
-        traj.sample(world.time(), &world.bodies, &world.scene.objects)
+        traj.sample(world.time(), &world.state.bodies, &world.scene.objects)
             .map_err(|e| io(e, "trajectory.csv"))?;
     }
     if render_stride.is_some() && marks.is_none() {
-        let timer = world.stage.start(Stage::Render);
+        let timer = world.diagnostics.stage.start(Stage::Render);
         publish(frames, &world, &mut frame_index, &mut frame_digests);
-        world.stage.stop(timer);
+        world.diagnostics.stage.stop(timer);
     }
     // Writes the world as it stands; the trajectory is flushed first so the
     // file holds every row up to the checkpoint's time.
@@ -331,12 +332,12 @@ pub fn run_driven(
 
     let mut end_reason = "duration";
     let mut failure = None;
-    while world.steps < total_steps {
+    while world.state.steps < total_steps {
         if crate::interrupt::requested().is_some() {
             end_reason = "interrupted";
             break;
         }
-        if until_rest && world.steps > 0 && world.at_rest() {
+        if until_rest && world.state.steps > 0 && world.at_rest() {
             end_reason = "rest";
             break;
         }
@@ -346,22 +347,22 @@ pub fn run_driven(
         }
         let stepped = world.step(exec);
         // Also after a failure: its islands are the ones to look at.
-        capture::islands(&world.captured_islands);
+        capture::islands(&world.diagnostics.captured_islands);
         if let Err(f) = stepped {
             failure = Some(f.to_string());
             break;
         }
         driver.after_step(&mut world);
-        let s = world.steps;
+        let s = world.state.steps;
         if s % sample_stride == 0 || s == total_steps {
-            traj.sample(world.time(), &world.bodies, &world.scene.objects)
+            traj.sample(world.time(), &world.state.bodies, &world.scene.objects)
                 .map_err(|e| io(e, "trajectory.csv"))?;
         }
         if let Some(stride) = render_stride {
             if s % stride == 0 {
-                let timer = world.stage.start(Stage::Render);
+                let timer = world.diagnostics.stage.start(Stage::Render);
                 publish(frames, &world, &mut frame_index, &mut frame_digests);
-                world.stage.stop(timer);
+                world.diagnostics.stage.stop(timer);
             }
         }
         if checkpoint_stride.is_some_and(|k| s % k == 0) {
@@ -371,17 +372,18 @@ pub fn run_driven(
             worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
             frame_started = Instant::now();
             let awake = world
+                .state
                 .bodies
                 .iter()
                 .filter(|b| b.activity == Activity::Awake && b.is_dynamic())
                 .count();
-            progress.update(world.time(), awake, world.bodies.len());
+            progress.update(world.time(), awake, world.state.bodies.len());
         }
     }
     if failure.is_none() && end_reason == "duration" && until_rest && world.at_rest() {
         end_reason = "rest";
     }
-    if world.steps % frame_stride != 0 {
+    if world.state.steps % frame_stride != 0 {
         // The last, partial frame.
         worst_frame = worst_frame.max(frame_started.elapsed().as_secs_f64());
     }
@@ -393,7 +395,7 @@ pub fn run_driven(
         // The end row (if the last step was not a sample). After a failure
         // the state is the broken one: the trajectory ends at the last good
         // sample, and the last checkpoint written stays as it is.
-        traj.sample(world.time(), &world.bodies, &world.scene.objects)
+        traj.sample(world.time(), &world.state.bodies, &world.scene.objects)
             .map_err(|e| io(e, "trajectory.csv"))?;
         let written_now = last_good
             .as_ref()
@@ -422,19 +424,19 @@ pub fn run_driven(
     }
     // Simulation time ends here; waiting for the renderer to drain is render time.
     let wall = started.elapsed().as_secs_f64();
-    let timer = world.stage.start(Stage::Render);
+    let timer = world.diagnostics.stage.start(Stage::Render);
     let (frames_rendered, frames_dropped, adapter, frame_notes) = if render_stride.is_some() {
         frames.finish(frame_of(&world, frame_index, first_frame))
     } else {
         (0, 0, None, Vec::new())
     };
     notes.extend(frame_notes);
-    world.stage.stop(timer);
+    world.diagnostics.stage.stop(timer);
     let (mut per_rank, mut distributed) = exec.finish();
     distributed.close(wall, world.group_work());
     per_rank.extend(frames.rank_summary());
-    world.stage.communication = per_rank.first().map_or(0.0, |r| r.waiting_s);
-    for (size, e) in world.counters.solve.failures.iter().take(5) {
+    world.diagnostics.stage.communication = per_rank.first().map_or(0.0, |r| r.waiting_s);
+    for (size, e) in world.diagnostics.counters.solve.failures.iter().take(5) {
         notes.push(format!(
             "LCP solve of {size} rows failed or was rejected ({e}); a fallback solve was used"
         ));
@@ -445,8 +447,8 @@ pub fn run_driven(
         scene_path,
         scene_digest,
         ranks: per_rank.len() as u32,
-        bodies: world.bodies.len(),
-        steps: world.steps,
+        bodies: world.state.bodies.len(),
+        steps: world.state.steps,
         sim_time_s: world.time(),
         wall_time_s: wall,
         dt_s: dt,
@@ -459,27 +461,29 @@ pub fn run_driven(
             end_reason.into()
         },
         failure: failure.clone(),
-        max_penetration_m: world.max_penetration,
+        max_penetration_m: world.diagnostics.max_penetration,
         energy_initial_j: energy_initial,
         energy_final_j: world.energy(),
-        stage_seconds: world.stage.clone(),
+        stage_seconds: world.diagnostics.stage.clone(),
         per_rank: per_rank
             .into_iter()
-            .map(|r| RankLine::new(r, hosts, world.steps.div_ceil(frame_stride)))
+            .map(|r| RankLine::new(r, hosts, world.state.steps.div_ceil(frame_stride)))
             .collect(),
         state_hash: world.state_hash(),
-        counters: world.counters.clone(),
+        counters: world.diagnostics.counters.clone(),
         bodies_resting: world
+            .state
             .bodies
             .iter()
             .filter(|b| b.activity == Activity::Sleeping)
             .count(),
         bodies_fallen: world
+            .state
             .bodies
             .iter()
             .filter(|b| b.activity == Activity::Fallen)
             .count(),
-        fallen: world.fallen.clone(),
+        fallen: world.state.fallen.clone(),
         distributed,
         frames_rendered,
         frames_dropped,

@@ -170,7 +170,7 @@ fn separating_pair_skip_changes_no_result_and_fires() {
         let run = |skip: bool| {
             let scene = rigidsim::scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
             let mut w = World::new(scene);
-            w.switches.skip_separating = skip;
+            w.settings.skip_separating = skip;
             let mut exec = Inline::default();
             while w.time() < seconds - 1e-9 {
                 w.step(&mut exec).unwrap();
@@ -179,16 +179,17 @@ fn separating_pair_skip_changes_no_result_and_fires() {
         };
         let (with, without) = (run(true), run(false));
         assert_eq!(with.state_hash(), without.state_hash(), "{name}");
-        assert_eq!(without.counters.pairs_skipped_separating, 0);
+        assert_eq!(without.diagnostics.counters.pairs_skipped_separating, 0);
         assert!(
-            with.counters.pair_tests <= without.counters.pair_tests,
+            with.diagnostics.counters.pair_tests <= without.diagnostics.counters.pair_tests,
             "{name}: the skip must not add tests"
         );
         println!(
             "{name}: {} of {} end-of-step tests skipped",
-            with.counters.pairs_skipped_separating, without.counters.pair_tests
+            with.diagnostics.counters.pairs_skipped_separating,
+            without.diagnostics.counters.pair_tests
         );
-        fired += with.counters.pairs_skipped_separating;
+        fired += with.diagnostics.counters.pairs_skipped_separating;
     }
     assert!(fired > 0, "no pair was skipped in any scene");
 }

@@ -113,9 +113,9 @@ fn load(text: &str) -> Scene {
 }
 
 fn run_to(w: &mut World, exec: &mut Inline, steps: u64) {
-    while w.steps < steps {
+    while w.state.steps < steps {
         w.step(exec)
-            .unwrap_or_else(|e| panic!("{e} (at step {})", w.steps));
+            .unwrap_or_else(|e| panic!("{e} (at step {})", w.state.steps));
     }
 }
 
@@ -135,8 +135,8 @@ fn resumed_world_ends_with_the_same_state_hash() {
     }
     run_to(&mut reference, &mut exec, end);
     // The scene must exercise what the checkpoint carries.
-    assert!(reference.counters.wakes > 0, "nothing woke up");
-    assert!(reference.counters.toi_events > 0);
+    assert!(reference.diagnostics.counters.wakes > 0, "nothing woke up");
+    assert!(reference.diagnostics.counters.toi_events > 0);
     let sleeping_somewhere = checkpoints.iter().any(|(_, bytes)| {
         let ck = Checkpoint::from_bytes(bytes, Path::new("mem")).unwrap();
         ck.bodies
@@ -157,16 +157,31 @@ fn resumed_world_ends_with_the_same_state_hash() {
             reference.state_hash(),
             "resumed at step {k}"
         );
-        for (i, (a, b)) in resumed.bodies.iter().zip(&reference.bodies).enumerate() {
+        for (i, (a, b)) in resumed
+            .state
+            .bodies
+            .iter()
+            .zip(&reference.state.bodies)
+            .enumerate()
+        {
             assert_eq!(a.activity, b.activity, "body {i}, resumed at step {k}");
         }
-        assert_eq!(resumed.counters.steps, reference.counters.steps);
-        assert_eq!(resumed.counters.wakes, reference.counters.wakes);
-        assert_eq!(resumed.max_penetration, reference.max_penetration);
+        assert_eq!(
+            resumed.diagnostics.counters.steps,
+            reference.diagnostics.counters.steps
+        );
+        assert_eq!(
+            resumed.diagnostics.counters.wakes,
+            reference.diagnostics.counters.wakes
+        );
+        assert_eq!(
+            resumed.diagnostics.max_penetration,
+            reference.diagnostics.max_penetration
+        );
     }
 }
 
-/// The fall times `summary.json` lists (`World::fallen`) are part of the
+/// The fall times `summary.json` lists (`WorldState::fallen`) are part of the
 /// checkpoint (since format 8): resumed before, between and after two falls
 /// beside a floor, a run lists the same falls at the same times.
 #[test]
@@ -201,6 +216,7 @@ position = [-3.0, 0.0, 0.0]
     }
     run_to(&mut reference, &mut exec, 100);
     let falls: Vec<(u32, f64)> = reference
+        .state
         .fallen
         .iter()
         .map(|f| (f.body.0, f.time))
@@ -211,7 +227,10 @@ position = [-3.0, 0.0, 0.0]
         let steps = ck.steps;
         let mut resumed = World::restore(load(text), ck).unwrap_or_else(|e| panic!("{e}"));
         run_to(&mut resumed, &mut Inline::default(), 100);
-        assert_eq!(resumed.fallen, reference.fallen, "resumed at step {steps}");
+        assert_eq!(
+            resumed.state.fallen, reference.state.fallen,
+            "resumed at step {steps}"
+        );
     }
 }
 

@@ -77,7 +77,7 @@ fn run(scene: &str) -> World {
 }
 
 fn bits(w: &World, i: usize) -> Vec<u64> {
-    let s = &w.bodies[i].state;
+    let s = &w.state.bodies[i].state;
     s.position
         .iter()
         .chain(s.orientation.coords.iter())
@@ -97,11 +97,11 @@ fn far_apart_piles_step_to_the_bit_as_if_alone() {
     let right = run(&format!("{OBJECTS}{}", pile(0.5)));
     let both = run(&format!("{OBJECTS}{}{}", pile(-0.5), pile(0.5)));
     assert!(
-        both.counters.toi_events > 20,
+        both.diagnostics.counters.toi_events > 20,
         "the piles must collide: {} events",
-        both.counters.toi_events
+        both.diagnostics.counters.toi_events
     );
-    assert!(both.counters.groups > 0);
+    assert!(both.diagnostics.counters.groups > 0);
     for i in 1..=5 {
         assert_eq!(bits(&both, i), bits(&left, i), "left pile, body {i}");
         assert_eq!(
@@ -112,8 +112,8 @@ fn far_apart_piles_step_to_the_bit_as_if_alone() {
         );
     }
     assert_eq!(
-        both.counters.toi_events,
-        left.counters.toi_events + right.counters.toi_events
+        both.diagnostics.counters.toi_events,
+        left.diagnostics.counters.toi_events + right.diagnostics.counters.toi_events
     );
 }
 
@@ -130,49 +130,55 @@ fn a_pour_ends_the_same_whatever_the_group_margin() {
     let scene = pour_with_late_bodies();
     let run_with = |margin: f64| {
         let mut w = world(&scene);
-        w.switches.group_margin = margin;
+        w.settings.group_margin = margin;
         run_until(&mut w, &mut Inline::default(), 2.2);
         w
     };
     let reference = run_with(0.0);
     assert!(
-        reference.counters.toi_events > 500,
+        reference.diagnostics.counters.toi_events > 500,
         "{:?}",
-        reference.counters
+        reference.diagnostics.counters
     );
     assert!(
-        reference.counters.wakes > 0,
+        reference.diagnostics.counters.wakes > 0,
         "nothing woke: {:?}",
-        reference.counters
+        reference.diagnostics.counters
     );
     // Every event is counted once by the bodies it rolled back, and a
     // pour's events roll back more than one body.
-    let rollback = reference.counters.toi_events_by_rollback;
-    assert_eq!(rollback.iter().sum::<u64>(), reference.counters.toi_events);
+    let rollback = reference.diagnostics.counters.toi_events_by_rollback;
+    assert_eq!(
+        rollback.iter().sum::<u64>(),
+        reference.diagnostics.counters.toi_events
+    );
     assert!(rollback[1..].iter().sum::<u64>() > 0, "{rollback:?}");
     // Some events repair a touching pair (a rocking body's other corner
     // landing); most are bodies meeting from apart.
-    let repairs = reference.counters.overlap_repairs;
-    assert!(repairs > 0 && 2 * repairs < reference.counters.toi_events);
+    let repairs = reference.diagnostics.counters.overlap_repairs;
+    assert!(repairs > 0 && 2 * repairs < reference.diagnostics.counters.toi_events);
     for margin in [0.02, rigidsim::step::GROUP_MARGIN, 1.0] {
         let w = run_with(margin);
         assert_eq!(w.state_hash(), reference.state_hash(), "margin {margin}");
-        assert_eq!(w.counters.toi_events, reference.counters.toi_events);
-        assert_eq!(w.counters.toi_events_by_rollback, rollback);
-        assert_eq!(w.counters.overlap_repairs, repairs);
+        assert_eq!(
+            w.diagnostics.counters.toi_events,
+            reference.diagnostics.counters.toi_events
+        );
+        assert_eq!(w.diagnostics.counters.toi_events_by_rollback, rollback);
+        assert_eq!(w.diagnostics.counters.overlap_repairs, repairs);
         if margin == 1.0 {
             assert!(
-                w.counters.groups < reference.counters.groups,
+                w.diagnostics.counters.groups < reference.diagnostics.counters.groups,
                 "the margin must merge groups: {} against {}",
-                w.counters.groups,
-                reference.counters.groups
+                w.diagnostics.counters.groups,
+                reference.diagnostics.counters.groups
             );
         }
     }
 }
 
 /// The same pour with its large groups split into the parts that interact
-/// within each step (`World::split_groups`) ends on the very state of the
+/// within each step (`StepSettings::split_groups`) ends on the very state of the
 /// pour stepped whole: every pair between parts whose paths met was found
 /// by the check between parts, and the parts that met stepped again as
 /// one. The split must have happened and merged parts, or the comparison
@@ -184,29 +190,32 @@ fn a_pour_ends_the_same_with_its_groups_split() {
     let scene = pour_with_late_bodies();
     let run_with = |split: bool| {
         let mut w = world(&scene);
-        w.switches.split_groups = split;
+        w.settings.split_groups = split;
         run_until(&mut w, &mut Inline::default(), 2.2);
         w
     };
     let whole = run_with(false);
     let split = run_with(true);
     assert!(
-        whole.counters.largest_group >= rigidsim::step::SPLIT_MIN_MEMBERS as u64,
+        whole.diagnostics.counters.largest_group >= rigidsim::step::SPLIT_MIN_MEMBERS as u64,
         "no group large enough to split: {:?}",
-        whole.counters
+        whole.diagnostics.counters
     );
     assert!(
-        split.counters.largest_group < whole.counters.largest_group,
+        split.diagnostics.counters.largest_group < whole.diagnostics.counters.largest_group,
         "the split made no smaller groups: {} against {}",
-        split.counters.largest_group,
-        whole.counters.largest_group
+        split.diagnostics.counters.largest_group,
+        whole.diagnostics.counters.largest_group
     );
     assert!(
-        split.counters.group_reruns > 0,
+        split.diagnostics.counters.group_reruns > 0,
         "no parts met (the check between parts was not exercised): {:?}",
-        split.counters
+        split.diagnostics.counters
     );
     assert_eq!(split.state_hash(), whole.state_hash());
-    assert_eq!(split.counters.toi_events, whole.counters.toi_events);
-    assert_eq!(split.counters.overlaps_accepted, 0);
+    assert_eq!(
+        split.diagnostics.counters.toi_events,
+        whole.diagnostics.counters.toi_events
+    );
+    assert_eq!(split.diagnostics.counters.overlaps_accepted, 0);
 }

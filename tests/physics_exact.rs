@@ -27,9 +27,9 @@ fn projectile_follows_the_parabola_within_1e_9_m() {
     run_until(&mut w, &mut Inline::default(), 1.0);
     let t = 1.0;
     let exact = Vector3::new(t, 0.0, 5.0 * t - 0.5 * G * t * t);
-    let err = (w.bodies[0].state.position - exact).norm();
+    let err = (w.state.bodies[0].state.position - exact).norm();
     assert!(err <= 1e-9, "position error {err:e} m");
-    assert!((w.bodies[0].state.velocity - Vector3::new(1.0, 0.0, 5.0 - G)).norm() <= 1e-12);
+    assert!((w.state.bodies[0].state.velocity - Vector3::new(1.0, 0.0, 5.0 - G)).norm() <= 1e-12);
 }
 
 /// OSRF "boxes" benchmark body: 0.1 × 0.4 × 0.9 m, 10 kg, ω0 = (0.1, 5, 0.1),
@@ -53,15 +53,15 @@ fn torque_free_box_keeps_energy_and_angular_momentum_within_1e_6() {
     let o = w.object(0).clone();
     // OSRF's inertia for this box: diag(0.80833, 0.68333, 0.14167).
     assert!((o.inertia[(0, 0)] - 0.808_333_333).abs() < 1e-6);
-    let e0 = w.bodies[0].kinetic_energy(&o);
-    let l0 = w.bodies[0].state.angular_momentum;
+    let e0 = w.state.bodies[0].kinetic_energy(&o);
+    let l0 = w.state.bodies[0].state.angular_momentum;
     let mut exec = Inline::default();
     let mut flipped = false;
     let mut worst_e: f64 = 0.0;
     let mut worst_l: f64 = 0.0;
     while w.time() < 10.0 - 1e-9 {
         w.step(&mut exec).unwrap();
-        let b = &w.bodies[0];
+        let b = &w.state.bodies[0];
         worst_e = worst_e.max(((b.kinetic_energy(&o) - e0) / e0).abs());
         worst_l = worst_l.max((b.state.angular_momentum.norm() - l0.norm()).abs() / l0.norm());
         assert!((b.state.orientation.quaternion().norm() - 1.0).abs() < 1e-14);
@@ -74,7 +74,7 @@ fn torque_free_box_keeps_energy_and_angular_momentum_within_1e_6() {
     assert!(worst_e <= 1e-6, "energy drift {worst_e:e}");
     assert!(worst_l <= 1e-6, "|L| drift {worst_l:e}");
     // World angular momentum is constant as a vector, not only in size.
-    assert!((w.bodies[0].state.angular_momentum - l0).norm() <= 1e-12 * l0.norm());
+    assert!((w.state.bodies[0].state.angular_momentum - l0).norm() <= 1e-12 * l0.norm());
 }
 
 fn bouncing_cube(e: f64, dt: f64) -> rigidsim::step::World {
@@ -134,7 +134,7 @@ fn bounces_follow_restitution(speculative_speed: f64) {
     let mut prev_vz = 0.0;
     while w.time() < impacts[4] + 0.01 {
         w.step(&mut exec).unwrap();
-        let s = w.bodies[1].state;
+        let s = w.state.bodies[1].state;
         let (z, vz) = (s.position.z - 0.05, s.velocity.z);
         if prev_vz < 0.0 && vz > 0.0 {
             // Bounced in this step: back to the moment the bottom touched z = 0
@@ -172,13 +172,13 @@ fn time_of_impact_leaves_the_gap_within_the_contact_tolerance() {
     let mut w = bouncing_cube(0.0, 0.01);
     let mut exec = Inline::default();
     run_until(&mut w, &mut exec, 1.0);
-    let gap = w.bodies[1].state.position.z - 0.05;
+    let gap = w.state.bodies[1].state.position.z - 0.05;
     // Resting after a perfectly inelastic impact: within [−δ, δ], δ = 1e-5 m.
     assert!(
         gap.abs() <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE,
         "gap {gap:e}"
     );
-    assert!(w.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE);
+    assert!(w.diagnostics.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE);
 }
 
 fn row_of_cubes(velocities: &[f64], positions: &[f64]) -> rigidsim::step::World {
@@ -213,15 +213,19 @@ fn cubes_exchange_velocities_with_the_speculative_dial_on() {
 
 fn cubes_exchange_velocities(speculative_speed: f64) {
     let mut w = dialled(row_of_cubes(&[1.0, -0.5], &[-0.5, 0.5]), speculative_speed);
-    let p0: Vector3<f64> = w.bodies.iter().map(|b| b.state.velocity).sum();
+    let p0: Vector3<f64> = w.state.bodies.iter().map(|b| b.state.velocity).sum();
     run_until(&mut w, &mut Inline::default(), 1.0);
-    let (va, vb) = (w.bodies[0].state.velocity, w.bodies[1].state.velocity);
+    let (va, vb) = (
+        w.state.bodies[0].state.velocity,
+        w.state.bodies[1].state.velocity,
+    );
     assert!((va - Vector3::new(-0.5, 0.0, 0.0)).norm() < 1e-9, "{va:?}");
     assert!((vb - Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-9, "{vb:?}");
-    let p1: Vector3<f64> = w.bodies.iter().map(|b| b.state.velocity).sum();
+    let p1: Vector3<f64> = w.state.bodies.iter().map(|b| b.state.velocity).sum();
     assert!((p1 - p0).norm() <= 1e-12 * p0.norm());
     assert!(
-        w.bodies
+        w.state
+            .bodies
             .iter()
             .all(|b| b.state.angular_momentum.norm() < 1e-12)
     );
@@ -247,7 +251,7 @@ fn cradle_gives_the_simultaneous_answer(speculative_speed: f64) {
     );
     let e0: f64 = 0.5 * v * v;
     run_until(&mut w, &mut Inline::default(), 1.0);
-    let got: Vec<f64> = w.bodies.iter().map(|b| b.state.velocity.x).collect();
+    let got: Vec<f64> = w.state.bodies.iter().map(|b| b.state.velocity.x).collect();
     for (g, want) in got.iter().zip([-v / 3.0, 2.0 * v / 3.0, 2.0 * v / 3.0]) {
         assert!((g - want).abs() < 1e-9, "{got:?}");
     }
@@ -312,11 +316,12 @@ fn bar_struck_off_its_centre(speculative_speed: f64) {
     );
     let momentum = |w: &rigidsim::step::World| -> (Vector3<f64>, Vector3<f64>) {
         let p = w
+            .state
             .bodies
             .iter()
             .enumerate()
             .map(|(i, b)| b.state.velocity * w.object(i).mass);
-        let l = w.bodies.iter().enumerate().map(|(i, b)| {
+        let l = w.state.bodies.iter().enumerate().map(|(i, b)| {
             let m = w.object(i).mass;
             b.state.angular_momentum + b.state.position.cross(&(b.state.velocity * m))
         });
@@ -326,7 +331,7 @@ fn bar_struck_off_its_centre(speculative_speed: f64) {
     run_until(&mut w, &mut Inline::default(), 0.5);
     let i_zz = m2 * (0.05_f64.powi(2) + 0.3_f64.powi(2)) / 3.0;
     let j = (1.0 + e) * v / (1.0 / m1 + 1.0 / m2 + d * d / i_zz);
-    let (cube, bar) = (&w.bodies[0], &w.bodies[1]);
+    let (cube, bar) = (&w.state.bodies[0], &w.state.bodies[1]);
     let (w_cube, w_bar) = (
         cube.angular_velocity(w.object(0)),
         bar.angular_velocity(w.object(1)),
@@ -373,20 +378,20 @@ fn resting_cube_neither_drifts_nor_sinks_and_carries_its_weight() {
         position = [0.3, -0.2, 0.1]
         "#
     ));
-    w.switches.sleep_enabled = false;
-    let start = w.bodies[1].state.position;
+    w.settings.sleep_enabled = false;
+    let start = w.state.bodies[1].state.position;
     let mut exec = Inline::default();
     while w.time() < 10.0 - 1e-9 {
         w.step(&mut exec).unwrap();
         // Total normal force each step is the weight: impulse m·g·dt per step.
-        let f = w.last_normal_force_sum;
+        let f = w.diagnostics.last_normal_force_sum;
         assert!(
             (f - 2.0 * G).abs() <= 1e-9 * 2.0 * G,
             "normal force {f} at t = {}",
             w.time()
         );
     }
-    let p = w.bodies[1].state.position;
+    let p = w.state.bodies[1].state.position;
     assert!(
         ((p - start).xy()).norm() <= 1e-6,
         "drift {:e}",
@@ -413,7 +418,7 @@ fn stack(masses: &[f64], sleep: bool) -> rigidsim::step::World {
         ));
     }
     let mut w = world(&s);
-    w.switches.sleep_enabled = sleep;
+    w.settings.sleep_enabled = sleep;
     w
 }
 
@@ -422,10 +427,10 @@ fn stack(masses: &[f64], sleep: bool) -> rigidsim::step::World {
 fn stack_of_ten_cubes_carries_k_m_g_under_the_kth() {
     let n = 10;
     let mut w = stack(&vec![1.0; n], false);
-    let start: Vec<_> = w.bodies.iter().map(|b| b.state.position).collect();
+    let start: Vec<_> = w.state.bodies.iter().map(|b| b.state.position).collect();
     let mut exec = Inline::default();
     run_until(&mut w, &mut exec, 5.0);
-    let forces = w.last_pair_forces.clone();
+    let forces = w.diagnostics.last_pair_forces.clone();
     assert_eq!(forces.len(), n, "{forces:?}");
     for (a, b, f) in forces {
         // Pair (a, b), a < b: body b sits on a; bodies b..=n are above.
@@ -438,7 +443,7 @@ fn stack_of_ten_cubes_carries_k_m_g_under_the_kth() {
             b.0
         );
     }
-    for (i, b) in w.bodies.iter().enumerate() {
+    for (i, b) in w.state.bodies.iter().enumerate() {
         assert!(
             (b.state.position - start[i]).norm() <= 1e-6,
             "body {i} moved"
@@ -449,14 +454,15 @@ fn stack_of_ten_cubes_carries_k_m_g_under_the_kth() {
 #[test]
 fn heavy_cube_on_a_light_one_holds_without_sinking() {
     let mut w = stack(&[1.0, 1000.0], false);
-    let start: Vec<_> = w.bodies.iter().map(|b| b.state.position).collect();
+    let start: Vec<_> = w.state.bodies.iter().map(|b| b.state.position).collect();
     let mut exec = Inline::default();
     run_until(&mut w, &mut exec, 5.0);
-    for (i, b) in w.bodies.iter().enumerate() {
+    for (i, b) in w.state.bodies.iter().enumerate() {
         let d = b.state.position - start[i];
         assert!(d.norm() <= 1e-6, "body {i} moved {d:?}");
     }
     let under_light: f64 = w
+        .diagnostics
         .last_pair_forces
         .iter()
         .find(|(a, _, _)| a.0 == 0)
@@ -495,16 +501,16 @@ fn tilted(mu: f64, downhill: Vector3<f64>) -> rigidsim::step::World {
         "#,
         g.x, g.y, g.z
     ));
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     w
 }
 
 #[test]
 fn box_with_mu_0_7_stays_put_on_a_30_degree_slope() {
     let mut w = tilted(0.7, Vector3::x());
-    let start = w.bodies[1].state.position;
+    let start = w.state.bodies[1].state.position;
     run_until(&mut w, &mut Inline::default(), 2.0);
-    let d = (w.bodies[1].state.position - start).norm();
+    let d = (w.state.bodies[1].state.position - start).norm();
     assert!(d <= 1e-6, "moved {d:e} m");
 }
 
@@ -518,7 +524,7 @@ fn box_with_mu_0_3_slides_at_g_sin_minus_mu_cos_also_diagonally() {
     ] {
         let mut w = tilted(0.3, dir);
         run_until(&mut w, &mut Inline::default(), 2.0);
-        let s = w.bodies[1].state;
+        let s = w.state.bodies[1].state;
         let along = s.position.dot(&dir.normalize());
         let a = 2.0 * along / (2.0 * 2.0);
         assert!(
@@ -568,7 +574,7 @@ fn friction_is_isotropic_on_a_level_floor() {
             v0 * s
         ));
         run_until(&mut w, &mut Inline::default(), 0.3);
-        let v = w.bodies[1].state.velocity;
+        let v = w.state.bodies[1].state.velocity;
         let decel = (v0 - v.xy().norm()) / 0.3;
         assert!(
             ((decel - mu * G) / (mu * G)).abs() < 0.01,
@@ -589,20 +595,20 @@ fn resting_pile_costs_nothing_until_a_falling_body_wakes_it() {
     let mut exec = Inline::default();
     run_until(&mut w, &mut exec, 2.0);
     assert!(
-        w.bodies[1..]
+        w.state.bodies[1..]
             .iter()
             .all(|b| b.activity == Activity::Sleeping)
     );
     let before = (
-        w.counters.integrations,
-        w.counters.pair_tests,
-        w.counters.islands,
+        w.diagnostics.counters.integrations,
+        w.diagnostics.counters.pair_tests,
+        w.diagnostics.counters.islands,
     );
     run_until(&mut w, &mut exec, 3.0);
     let after = (
-        w.counters.integrations,
-        w.counters.pair_tests,
-        w.counters.islands,
+        w.diagnostics.counters.integrations,
+        w.diagnostics.counters.pair_tests,
+        w.diagnostics.counters.islands,
     );
     assert_eq!(
         before, after,
@@ -643,28 +649,31 @@ fn body_dropped_on_a_resting_pile_wakes_it() {
     let mut exec = Inline::default();
     run_until(&mut w, &mut exec, 0.6);
     assert_eq!(
-        w.bodies[1].activity,
+        w.state.bodies[1].activity,
         Activity::Sleeping,
         "the pile should rest before the drop lands"
     );
     run_until(&mut w, &mut exec, 0.8);
-    assert!(w.counters.wakes > 0, "the impact should wake the pile");
+    assert!(
+        w.diagnostics.counters.wakes > 0,
+        "the impact should wake the pile"
+    );
     run_until(&mut w, &mut exec, 5.0);
     // All three end up stacked and resting again, without overlap.
     assert!(
-        w.bodies[1..]
+        w.state.bodies[1..]
             .iter()
             .all(|b| b.activity == Activity::Sleeping)
     );
     assert!(
-        w.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE,
+        w.diagnostics.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE,
         "{:e}",
-        w.max_penetration
+        w.diagnostics.max_penetration
     );
     assert!(
-        (w.bodies[3].state.position.z - 0.5).abs() < 1e-4,
+        (w.state.bodies[3].state.position.z - 0.5).abs() < 1e-4,
         "top at {}",
-        w.bodies[3].state.position.z
+        w.state.bodies[3].state.position.z
     );
 }
 
@@ -683,7 +692,7 @@ fn drop_on_a_stack_keeps_horizontal_momentum_on_a_frictionless_floor() {
     let mut worst = 0.0f64;
     while w.time() < 3.0 {
         w.step(&mut exec).unwrap();
-        let p: Vector3<f64> = w.bodies[1..].iter().map(|b| b.state.velocity).sum();
+        let p: Vector3<f64> = w.state.bodies[1..].iter().map(|b| b.state.velocity).sum();
         worst = worst.max(p.x.abs()).max(p.y.abs());
     }
     // Rounding of impulses of about 5 N s.
@@ -721,7 +730,7 @@ fn fast_cube_does_not_tunnel_through_a_thin_wall() {
             "#
         ));
         run_until(&mut w, &mut Inline::default(), 0.1);
-        let b = &w.bodies[1].state;
+        let b = &w.state.bodies[1].state;
         assert!(
             b.position.x < 1.0 - 0.005,
             "{speed} m/s: bullet at x = {}",
@@ -732,7 +741,9 @@ fn fast_cube_does_not_tunnel_through_a_thin_wall() {
             "{speed} m/s: should bounce back, v = {}",
             b.velocity.x
         );
-        assert!(w.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE);
+        assert!(
+            w.diagnostics.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE
+        );
     }
 }
 
@@ -769,9 +780,9 @@ fn spinning_bar_does_not_sweep_through_a_small_cube() {
         0.2 * angle.sin()
     ));
     w.step(&mut Inline::default()).unwrap();
-    let spin = w.bodies[0].angular_velocity(w.object(0)).z;
+    let spin = w.state.bodies[0].angular_velocity(w.object(0)).z;
     assert!(spin < 50.0 - 1.0, "the bar kept spinning at {spin} rad/s");
-    assert!(w.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE);
+    assert!(w.diagnostics.max_penetration <= rigidsim::collision::narrowphase::CONTACT_TOLERANCE);
 }
 
 #[test]
@@ -795,7 +806,7 @@ fn force_window_gives_the_exact_impulse() {
         "#,
     );
     run_until(&mut w, &mut Inline::default(), 2.0);
-    let s = w.bodies[0].state;
+    let s = w.state.bodies[0].state;
     // a = 2 m/s² for 0.5 s: v = 1, x = ½·2·0.25 + 1·1.0 = 1.25.
     assert!((s.velocity.x - 1.0).abs() < 1e-12, "v = {}", s.velocity.x);
     assert!((s.position.x - 1.25).abs() < 1e-12, "x = {}", s.position.x);
@@ -829,8 +840,8 @@ fn driven_paddle_pushes_a_box_without_being_pushed_back() {
         "#
     ));
     run_until(&mut w, &mut Inline::default(), 1.0);
-    let paddle = w.bodies[1].state;
-    let bx = w.bodies[2].state;
+    let paddle = w.state.bodies[1].state;
+    let bx = w.state.bodies[2].state;
     assert!(
         (paddle.position.x - 0.5).abs() < 1e-12,
         "paddle at {}",
@@ -864,8 +875,8 @@ fn body_below_fall_z_stops_being_simulated() {
     );
     let mut exec = Inline::default();
     run_until(&mut w, &mut exec, 1.0);
-    assert_eq!(w.bodies[0].activity, Activity::Fallen);
-    let z = w.bodies[0].state.position.z;
+    assert_eq!(w.state.bodies[0].activity, Activity::Fallen);
+    let z = w.state.bodies[0].state.position.z;
     assert!(z < -0.5 && z > -0.7, "stopped just below fall_z, at {z}");
     assert!(w.at_rest());
 }
@@ -890,9 +901,9 @@ fn single_frictionless_contact_uses_the_closed_form() {
         position = [0.0, 0.0, 0.3]
         "#
     ));
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     run_until(&mut w, &mut Inline::default(), 0.2);
-    assert!(w.counters.solve.closed_form_solves > 0);
+    assert!(w.diagnostics.counters.solve.closed_form_solves > 0);
 }
 
 #[test]
@@ -915,10 +926,10 @@ fn scene_without_contacts_does_no_contact_work() {
         "#,
     );
     run_until(&mut w, &mut Inline::default(), 1.0);
-    assert_eq!(w.counters.pair_tests, 0);
-    assert_eq!(w.counters.islands, 0);
+    assert_eq!(w.diagnostics.counters.pair_tests, 0);
+    assert_eq!(w.diagnostics.counters.islands, 0);
     assert_eq!(
-        w.counters.solve.lcp_solves + w.counters.solve.closed_form_solves,
+        w.diagnostics.counters.solve.lcp_solves + w.diagnostics.counters.solve.closed_form_solves,
         0
     );
 }
@@ -949,7 +960,7 @@ fn no_fall_cutoff_without_a_floor() {
     let mut lowest = f64::INFINITY;
     while w.time() < 1.3 - 1e-9 {
         w.step(&mut exec).unwrap_or_else(|e| panic!("{e}"));
-        let (t, s) = (w.time(), w.bodies[0].state);
+        let (t, s) = (w.time(), w.state.bodies[0].state);
         let z = 1.0 + 4.0 * t - 0.5 * G * t * t;
         assert!(
             (s.position.z - z).abs() <= 1e-9,
@@ -960,12 +971,16 @@ fn no_fall_cutoff_without_a_floor() {
             (s.velocity.z - (4.0 - G * t)).abs() <= 1e-12,
             "vz at t = {t}"
         );
-        assert_eq!(w.bodies[0].activity, Activity::Awake, "stopped at t = {t}");
+        assert_eq!(
+            w.state.bodies[0].activity,
+            Activity::Awake,
+            "stopped at t = {t}"
+        );
         lowest = lowest.min(s.position.z);
     }
     assert!(
         lowest < -2.08,
         "lowest z {lowest}: the flight was cut short"
     );
-    assert!(w.fallen.is_empty() && w.counters.bodies_fallen == 0);
+    assert!(w.state.fallen.is_empty() && w.diagnostics.counters.bodies_fallen == 0);
 }

@@ -53,25 +53,34 @@ fn a_slow_approach_is_solved_at_the_step_without_an_event() {
         let mut w = falling_cube(6e-4, 0.03, 0.0, dial, 8);
         let mut exec = Inline::default();
         w.step(&mut exec).unwrap();
-        assert_eq!(w.counters.toi_events, events, "dial {dial}");
+        assert_eq!(w.diagnostics.counters.toi_events, events, "dial {dial}");
         // The exact model's event rolls back the cube alone.
         let rollback = [events, 0, 0, 0, 0];
-        assert_eq!(w.counters.toi_events_by_rollback, rollback, "dial {dial}");
+        assert_eq!(
+            w.diagnostics.counters.toi_events_by_rollback, rollback,
+            "dial {dial}"
+        );
         // It met the floor from apart: no overlap of a touching pair.
-        assert_eq!(w.counters.overlap_repairs, 0, "dial {dial}");
+        assert_eq!(w.diagnostics.counters.overlap_repairs, 0, "dial {dial}");
         // The speculative contact pushed, and the pair ended touching.
         let pushes = u64::from(dial > 0.0);
-        assert_eq!(w.counters.speculative_pushes, pushes, "dial {dial}");
-        assert_eq!(w.counters.speculative_ghosts, 0, "dial {dial}");
-        let gap = w.bodies[1].state.position.z - 0.05;
+        assert_eq!(
+            w.diagnostics.counters.speculative_pushes, pushes,
+            "dial {dial}"
+        );
+        assert_eq!(w.diagnostics.counters.speculative_ghosts, 0, "dial {dial}");
+        let gap = w.state.bodies[1].state.position.z - 0.05;
         assert!(
             (0.0..=CONTACT_TOLERANCE).contains(&gap),
             "dial {dial}: gap {gap:e}"
         );
         run_until(&mut w, &mut exec, 0.5);
-        assert!(w.max_penetration <= CONTACT_TOLERANCE, "dial {dial}");
-        assert_eq!(w.counters.overlaps_accepted, 0);
-        let gap = w.bodies[1].state.position.z - 0.05;
+        assert!(
+            w.diagnostics.max_penetration <= CONTACT_TOLERANCE,
+            "dial {dial}"
+        );
+        assert_eq!(w.diagnostics.counters.overlaps_accepted, 0);
+        let gap = w.state.bodies[1].state.position.z - 0.05;
         assert!(
             (0.0..=CONTACT_TOLERANCE).contains(&gap),
             "dial {dial}: rests at {gap:e}"
@@ -91,7 +100,7 @@ fn a_deferred_bounce_leaves_from_where_the_bodies_meet() {
     let mut w = falling_cube(gap, v0, e, 1.0, 1);
     let mut exec = Inline::default();
     w.step(&mut exec).unwrap();
-    let touching = w.bodies[1].state.position.z - 0.05;
+    let touching = w.state.bodies[1].state.position.z - 0.05;
     assert!(
         (0.0..=CONTACT_TOLERANCE).contains(&touching),
         "after the stop: gap {touching:e}"
@@ -100,10 +109,10 @@ fn a_deferred_bounce_leaves_from_where_the_bodies_meet() {
     let mut apex: f64 = 0.0;
     while w.time() < 0.1 {
         w.step(&mut exec).unwrap();
-        apex = apex.max(w.bodies[1].state.position.z - 0.05);
+        apex = apex.max(w.state.bodies[1].state.position.z - 0.05);
     }
-    assert_eq!(w.counters.toi_events, 0);
-    assert!(w.max_penetration <= CONTACT_TOLERANCE);
+    assert_eq!(w.diagnostics.counters.toi_events, 0);
+    assert!(w.diagnostics.max_penetration <= CONTACT_TOLERANCE);
     let v_touch = (v0 * v0 + 2.0 * G * gap).sqrt();
     let exact = (e * v_touch).powi(2) / (2.0 * G);
     assert!(

@@ -4,7 +4,7 @@
 //! binary and prints a table.
 //!
 //! Every case checks, every step: no NaN or infinity; the largest overlap the
-//! step left (`World::max_penetration`) below `CONTACT_TOLERANCE` (10 µm)
+//! step left (`Diagnostics::max_penetration`) below `CONTACT_TOLERANCE` (10 µm)
 //! unless a bound is stated; no body through another (a floor, a wall, a
 //! container, the other body of a head-on pair); no energy gain beyond the
 //! work done (kinetic plus gravitational energy never above its start, to a
@@ -67,8 +67,8 @@ impl Watch {
     /// One step, then the checks that hold for every case.
     fn step(&mut self, w: &mut World, exec: &mut Inline) {
         w.step(exec)
-            .unwrap_or_else(|e| panic!("{e} (step {})", w.steps));
-        for (i, b) in w.bodies.iter().enumerate() {
+            .unwrap_or_else(|e| panic!("{e} (step {})", w.state.steps));
+        for (i, b) in w.state.bodies.iter().enumerate() {
             let s = &b.state;
             let finite = s.position.iter().all(|x| x.is_finite())
                 && s.velocity.iter().all(|x| x.is_finite())
@@ -86,7 +86,7 @@ impl Watch {
             self.rise_at = w.time();
         }
         self.last = e;
-        if self.first_over.is_none() && w.max_penetration > CONTACT_TOLERANCE {
+        if self.first_over.is_none() && w.diagnostics.max_penetration > CONTACT_TOLERANCE {
             self.first_over = Some(w.time());
         }
     }
@@ -152,7 +152,8 @@ fn body(object: &str, p: [f64; 3], extra: &str) -> String {
 
 /// Total normal force of the last contact solve on each touching pair.
 fn pair_force(w: &World, a: usize, b: usize) -> f64 {
-    w.last_pair_forces
+    w.diagnostics
+        .last_pair_forces
         .iter()
         .filter(|(x, y, _)| (x.index(), y.index()) == (a.min(b), a.max(b)))
         .map(|(_, _, f)| f)
@@ -169,9 +170,9 @@ fn assert_rel(got: f64, want: f64, rel: f64, what: &str) {
 
 fn assert_penetration(w: &World, bound: f64, what: &str) {
     assert!(
-        w.max_penetration <= bound,
+        w.diagnostics.max_penetration <= bound,
         "{what}: max penetration {:e} m above {bound:e} m",
-        w.max_penetration
+        w.diagnostics.max_penetration
     );
 }
 
@@ -186,7 +187,7 @@ fn stack(masses: &[f64]) -> World {
         s += &body(&format!("c{i}"), [0.0, 0.0, 0.1 + 0.2 * i as f64], "");
     }
     let mut w = world(&s);
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     w
 }
 
@@ -195,7 +196,7 @@ fn stack(masses: &[f64]) -> World {
 /// nothing sinks, no energy is gained.
 fn check_stack(n: usize, seconds: f64, drift_max: f64, force_error_max: f64) {
     let mut w = stack(&vec![1.0; n]);
-    let top0 = w.bodies[n].state.position;
+    let top0 = w.state.bodies[n].state.position;
     let mut exec = Inline::default();
     let mut watch = Watch::new(&w);
     let mut worst_force: f64 = 0.0;
@@ -207,11 +208,11 @@ fn check_stack(n: usize, seconds: f64, drift_max: f64, force_error_max: f64) {
             worst_force = worst_force.max(((f - want) / want).abs());
         }
     }
-    let drift = (w.bodies[n].state.position - top0).norm();
+    let drift = (w.state.bodies[n].state.position - top0).norm();
     println!(
         "stack of {n}: {seconds} s, top drift {drift:.3e} m, force error {worst_force:.1e}, \
          penetration {:.1e} m, energy gain {:.1e} J, LCP failures {}",
-        w.max_penetration, watch.gain, w.counters.solve.failed
+        w.diagnostics.max_penetration, watch.gain, w.diagnostics.counters.solve.failed
     );
     assert!(drift <= 1e-3, "top drifted {drift:e} m");
     assert!(
@@ -229,9 +230,9 @@ fn check_stack(n: usize, seconds: f64, drift_max: f64, force_error_max: f64) {
         watch.gain
     );
     assert!(
-        w.counters.solve.failed == 0,
+        w.diagnostics.counters.solve.failed == 0,
         "{:?}",
-        w.counters.solve.failures
+        w.diagnostics.counters.solve.failures
     );
 }
 
@@ -268,22 +269,22 @@ fn stack_solved_iteratively_holds_warm_or_cold() {
     let n = 20;
     let iterative = |warm: bool| {
         let mut w = stack(&vec![1.0; n]);
-        w.switches.warm_start = warm;
-        w.switches.iterative_min_rows = 100;
+        w.settings.warm_start = warm;
+        w.settings.iterative_min_rows = 100;
         w
     };
     let run = |warm: bool| {
         let mut w = iterative(warm);
-        let top0 = w.bodies[n].state.position;
+        let top0 = w.state.bodies[n].state.position;
         let mut exec = Inline::default();
         let (mut sink, mut sideways): (f64, f64) = (0.0, 0.0);
         let mut half = None;
         while w.time() < 2.0 - 1e-9 {
             w.step(&mut exec).unwrap();
-            let d = w.bodies[n].state.position - top0;
+            let d = w.state.bodies[n].state.position - top0;
             sink = sink.max(-d.z);
             sideways = sideways.max(d.xy().norm());
-            if w.steps == 100 {
+            if w.state.steps == 100 {
                 half = Some(w.checkpoint());
             }
         }
@@ -295,17 +296,18 @@ fn stack_solved_iteratively_holds_warm_or_cold() {
         "stack of {n}, iterative: top sank {sink:.2e} m warm, {cold_sink:.2e} m cold; \
          sideways {sideways:.2e} m warm, {cold_sideways:.2e} m cold; penetration \
          {:.3e} m warm, {:.3e} m cold; {} iterative solves, {} unconverged",
-        warm.max_penetration,
-        cold.max_penetration,
-        warm.counters.solve.iterative_solves,
-        warm.counters.solve.iterative_unconverged
+        warm.diagnostics.max_penetration,
+        cold.diagnostics.max_penetration,
+        warm.diagnostics.counters.solve.iterative_solves,
+        warm.diagnostics.counters.solve.iterative_unconverged
     );
     for (w, sink, sideways, start) in [
         (&warm, sink, sideways, "warm"),
         (&cold, cold_sink, cold_sideways, "cold"),
     ] {
         assert!(
-            w.counters.solve.iterative_solves > 0 && w.counters.solve.lcp_solves == 0,
+            w.diagnostics.counters.solve.iterative_solves > 0
+                && w.diagnostics.counters.solve.lcp_solves == 0,
             "{start}: not solved iteratively"
         );
         assert!(sink <= ITERATIVE_SINK, "{start}: top sank {sink:e} m");
@@ -316,9 +318,9 @@ fn stack_solved_iteratively_holds_warm_or_cold() {
         assert_penetration(w, CONTACT_TOLERANCE, start);
     }
     let mut resumed = World::restore(iterative(true).scene, half).unwrap();
-    resumed.switches.iterative_min_rows = 100;
+    resumed.settings.iterative_min_rows = 100;
     let mut exec = Inline::default();
-    while resumed.steps < warm.steps {
+    while resumed.state.steps < warm.state.steps {
         resumed.step(&mut exec).unwrap();
     }
     assert_eq!(
@@ -342,7 +344,7 @@ fn pyramid() -> World {
         }
     }
     let mut w = world(&s);
-    w.switches.sleep_enabled = false;
+    w.settings.sleep_enabled = false;
     w
 }
 
@@ -351,23 +353,23 @@ fn pyramid() -> World {
 #[test]
 fn pyramid_of_fifteen_boxes_stands_for_3_s() {
     let mut w = pyramid();
-    let top = w.bodies.len() - 1;
-    let start: Vec<_> = w.bodies.iter().map(|b| b.state.position).collect();
+    let top = w.state.bodies.len() - 1;
+    let start: Vec<_> = w.state.bodies.iter().map(|b| b.state.position).collect();
     let mut exec = Inline::default();
     let mut watch = Watch::new(&w);
     watch.run_until(&mut w, &mut exec, 3.0);
     let floor_force: f64 = (1..=5).map(|i| pair_force(&w, 0, i)).sum();
-    let drift = (w.bodies[top].state.position - start[top]).norm();
-    let worst = (1..w.bodies.len())
-        .map(|i| (w.bodies[i].state.position - start[i]).norm())
+    let drift = (w.state.bodies[top].state.position - start[top]).norm();
+    let worst = (1..w.state.bodies.len())
+        .map(|i| (w.state.bodies[i].state.position - start[i]).norm())
         .fold(0.0, f64::max);
     println!(
         "pyramid: top drift {drift:.2e} m, largest move {worst:.2e} m, floor force {floor_force} N \
          (15 m g = {}), penetration {:.1e}, energy gain {:.1e} J, LCP failures {}",
         15.0 * G,
-        w.max_penetration,
+        w.diagnostics.max_penetration,
         watch.gain,
-        w.counters.solve.failed
+        w.diagnostics.counters.solve.failed
     );
     assert!(drift <= 1e-3, "top drifted {drift:e} m");
     assert_rel(floor_force, 15.0 * G, 1e-6, "floor force");
@@ -382,18 +384,18 @@ fn pyramid_of_fifteen_boxes_stands_for_3_s() {
 #[test]
 fn pyramid_of_fifteen_boxes_needs_no_lcp_fallback_and_gains_no_energy() {
     let mut w = pyramid();
-    let start: Vec<_> = w.bodies.iter().map(|b| b.state.position).collect();
+    let start: Vec<_> = w.state.bodies.iter().map(|b| b.state.position).collect();
     let mut exec = Inline::default();
     let mut watch = Watch::new(&w);
     watch.run_until(&mut w, &mut exec, 3.0);
-    let worst = (1..w.bodies.len())
-        .map(|i| (w.bodies[i].state.position - start[i]).norm())
+    let worst = (1..w.state.bodies.len())
+        .map(|i| (w.state.bodies[i].state.position - start[i]).norm())
         .fold(0.0, f64::max);
     assert!(
-        w.counters.solve.failed == 0,
+        w.diagnostics.counters.solve.failed == 0,
         "{} LCP failures, first: {:?}",
-        w.counters.solve.failed,
-        w.counters.solve.failures.first()
+        w.diagnostics.counters.solve.failed,
+        w.diagnostics.counters.solve.failures.first()
     );
     assert!(worst <= 1e-6, "a cube moved {worst:e} m");
     assert!(watch.gain <= 1e-8, "energy gain {:e} J", watch.gain);
@@ -409,7 +411,7 @@ fn mass_ratios_of_1000_and_10000_hold_with_exact_contact_forces() {
     for ratio in [1e3, 1e4] {
         for masses in [vec![1.0, ratio], vec![ratio, 1.0, ratio]] {
             let mut w = stack(&masses);
-            let start: Vec<_> = w.bodies.iter().map(|b| b.state.position).collect();
+            let start: Vec<_> = w.state.bodies.iter().map(|b| b.state.position).collect();
             let mut exec = Inline::default();
             let mut watch = Watch::new(&w);
             let mut worst: f64 = 0.0;
@@ -420,13 +422,13 @@ fn mass_ratios_of_1000_and_10000_hold_with_exact_contact_forces() {
                     worst = worst.max(((pair_force(&w, k - 1, k) - want) / want).abs());
                 }
             }
-            let moved = (1..w.bodies.len())
-                .map(|i| (w.bodies[i].state.position - start[i]).norm())
+            let moved = (1..w.state.bodies.len())
+                .map(|i| (w.state.bodies[i].state.position - start[i]).norm())
                 .fold(0.0, f64::max);
             println!(
                 "masses {masses:?}: force error {worst:.1e}, largest move {moved:.1e} m, \
                  penetration {:.1e} m",
-                w.max_penetration
+                w.diagnostics.max_penetration
             );
             assert!(worst <= 1e-6, "{masses:?}: force error {worst:e}");
             assert!(moved <= 1e-6, "{masses:?}: moved {moved:e} m");
@@ -485,12 +487,12 @@ fn fast_cubes_at_100_and_1000_m_s_do_not_pass_a_1_cm_wall() {
                     w.time()
                 );
             }
-            let v = w.bodies[1].state.velocity;
+            let v = w.state.bodies[1].state.velocity;
             println!(
                 "{speed} m/s, tilted {tilted}: v after {:?}, deepest reach {reach:.1e} m, \
                  penetration {:.1e}, energy gain {:.1e} J",
                 v.as_slice(),
-                w.max_penetration,
+                w.diagnostics.max_penetration,
                 watch.gain
             );
             assert!(v.x < 0.0, "no rebound: {v:?}");
@@ -537,7 +539,10 @@ fn fast_cubes_head_on_give_the_exact_one_dimensional_answer() {
         let mut watch = Watch::new(&w);
         while w.time() < 0.03 - 1e-9 {
             watch.step(&mut w, &mut exec);
-            let (xa, xb) = (w.bodies[0].state.position.x, w.bodies[1].state.position.x);
+            let (xa, xb) = (
+                w.state.bodies[0].state.position.x,
+                w.state.bodies[1].state.position.x,
+            );
             assert!(
                 xb - xa >= 0.1 - CONTACT_TOLERANCE,
                 "passed through each other at t = {}: {xa} {xb}",
@@ -547,7 +552,10 @@ fn fast_cubes_head_on_give_the_exact_one_dimensional_answer() {
         let p = m1 * v1 + m2 * v2;
         let want1 = (p + m2 * e * (v2 - v1)) / (m1 + m2);
         let want2 = (p + m1 * e * (v1 - v2)) / (m1 + m2);
-        let (got1, got2) = (w.bodies[0].state.velocity.x, w.bodies[1].state.velocity.x);
+        let (got1, got2) = (
+            w.state.bodies[0].state.velocity.x,
+            w.state.bodies[1].state.velocity.x,
+        );
         println!(
             "head-on {m1} kg at {v1} vs {m2} kg at {v2}, e {e}: {got1} / {got2} (want {want1} / {want2})"
         );
@@ -585,14 +593,14 @@ fn face_aligned_drop_lands_flat_without_turning() {
             watch.step(&mut w, &mut exec);
             lowest_bottom = lowest_bottom.min(lowest(&w, 1));
         }
-        let s = w.bodies[1].state;
+        let s = w.state.bodies[1].state;
         let turn = s.orientation.angle();
         println!(
             "face-aligned drop e = {e}: rest z {}, xy {:.1e}, turned {turn:.1e} rad, \
              lowest bottom {lowest_bottom}, asleep {}",
             s.position.z,
             s.position.xy().norm(),
-            w.bodies[1].activity == Activity::Sleeping
+            w.state.bodies[1].activity == Activity::Sleeping
         );
         assert!(s.position.xy().norm() <= 1e-9, "slid {:?}", s.position);
         assert!(turn <= 1e-9, "turned {turn:e} rad");
@@ -646,15 +654,15 @@ fn edge_on_edge(label: &str, falling: &str) -> (f64, Option<f64>, f64) {
             "{label}: through the floor"
         );
     }
-    let s = w.bodies[2].state;
+    let s = w.state.bodies[2].state;
     println!(
         "edge on edge, {label}: ends at {:?}, {:?}, penetration {:.1e} m (over 10 µm from t = {:?}), \
          TOI events {}, gain {:.1e} J",
         s.position.as_slice(),
-        w.bodies[2].activity,
-        w.max_penetration,
+        w.state.bodies[2].activity,
+        w.diagnostics.max_penetration,
         watch.first_over,
-        w.counters.toi_events,
+        w.diagnostics.counters.toi_events,
         watch.gain
     );
     assert!(
@@ -663,7 +671,11 @@ fn edge_on_edge(label: &str, falling: &str) -> (f64, Option<f64>, f64) {
         watch.gain
     );
     assert!(w.at_rest(), "{label}: still moving after 4 s");
-    (w.max_penetration, watch.first_over, s.position.z)
+    (
+        w.diagnostics.max_penetration,
+        watch.first_over,
+        s.position.z,
+    )
 }
 
 /// Crossed edges meet at one point above the centre of mass: the exact
@@ -722,12 +734,12 @@ fn cube_landing_on_an_edge_tips_off_and_rests_on_the_floor() {
         watch.step(&mut w, &mut exec);
         assert!(lowest(&w, 2) >= -CONTACT_TOLERANCE, "through the floor");
     }
-    let s = w.bodies[2].state;
+    let s = w.state.bodies[2].state;
     println!(
         "cube on an edge: rests at {:?} after {} s, penetration {:.1e}, gain {:.1e}",
         s.position.as_slice(),
         w.time(),
-        w.max_penetration,
+        w.diagnostics.max_penetration,
         watch.gain
     );
     assert!(w.at_rest(), "still moving after 6 s");
@@ -767,7 +779,7 @@ fn box_pushed_into_a_corner_stays_there() {
             ),
         );
         let mut w = world(&text);
-        w.switches.sleep_enabled = false;
+        w.settings.sleep_enabled = false;
         let mut exec = Inline::default();
         let mut watch = Watch::new(&w);
         while w.time() < 3.0 - 1e-9 {
@@ -782,7 +794,7 @@ fn box_pushed_into_a_corner_stays_there() {
             );
             assert!(lowest(&w, 3) >= -CONTACT_TOLERANCE, "into the floor");
         }
-        let s = w.bodies[3].state;
+        let s = w.state.bodies[3].state;
         let wall_force = pair_force(&w, 1, 3) + pair_force(&w, 2, 3);
         println!(
             "corner, spin {spin}: rests at {:?}, speed {:.1e}, wall force {wall_force:.1e} N, \
@@ -790,8 +802,8 @@ fn box_pushed_into_a_corner_stays_there() {
             s.position.as_slice(),
             s.velocity.norm(),
             pair_force(&w, 0, 3),
-            w.max_penetration,
-            w.counters.solve.failed
+            w.diagnostics.max_penetration,
+            w.diagnostics.counters.solve.failed
         );
         assert!(s.velocity.norm() <= 1e-9, "still moving: {:?}", s.velocity);
         assert_rel(pair_force(&w, 0, 3), G, 1e-6, "floor force");
@@ -880,8 +892,8 @@ fn torque_free_box_for_1000_s_keeps_energy_and_angular_momentum() {
          [[bodies]]\nobject = \"box\"\nangular_velocity = [0.1, 5.0, 0.1]\n",
     );
     let o = w.object(0).clone();
-    let e0 = w.bodies[0].kinetic_energy(&o);
-    let l0 = w.bodies[0].state.angular_momentum;
+    let e0 = w.state.bodies[0].kinetic_energy(&o);
+    let l0 = w.state.bodies[0].state.angular_momentum;
     let mut exec = Inline::default();
     let mut watch = Watch::new(&w);
     let (mut worst_e, mut worst_l): (f64, f64) = (0.0, 0.0);
@@ -889,13 +901,13 @@ fn torque_free_box_for_1000_s_keeps_energy_and_angular_momentum() {
     let mut curve = String::new();
     while w.time() < 1000.0 - 1e-9 {
         watch.step(&mut w, &mut exec);
-        let b = &w.bodies[0];
+        let b = &w.state.bodies[0];
         worst_e = worst_e.max(((b.kinetic_energy(&o) - e0) / e0).abs());
         worst_l = worst_l.max((b.state.angular_momentum - l0).norm() / l0.norm());
-        if w.steps % 10_000 == 0 {
+        if w.state.steps % 10_000 == 0 {
             let _ = write!(curve, " {:.0}s:{worst_e:.2e}", w.time());
         }
-        if w.steps == 10_000 {
+        if w.state.steps == 10_000 {
             worst_e_100 = worst_e;
         }
     }
@@ -923,15 +935,15 @@ fn torque_free_box_for_1000_s_keeps_energy_and_angular_momentum() {
 fn resting_stack_for_60_s_does_not_creep() {
     let n = 10;
     let mut w = stack(&vec![1.0; n]);
-    let start: Vec<_> = w.bodies.iter().map(|b| b.state.position).collect();
+    let start: Vec<_> = w.state.bodies.iter().map(|b| b.state.position).collect();
     let mut exec = Inline::default();
     let mut watch = Watch::new(&w);
     watch.run_until(&mut w, &mut exec, 60.0);
     let moved = (1..=n)
-        .map(|i| (w.bodies[i].state.position - start[i]).norm())
+        .map(|i| (w.state.bodies[i].state.position - start[i]).norm())
         .fold(0.0, f64::max);
     let turned = (1..=n)
-        .map(|i| w.bodies[i].state.orientation.angle())
+        .map(|i| w.state.bodies[i].state.orientation.angle())
         .fold(0.0, f64::max);
     println!(
         "resting stack 60 s: largest move {moved:.2e} m, turn {turned:.1e} rad, gain {:.1e} J, \
@@ -958,33 +970,36 @@ fn pour_fifty_nuts_and_bolts(bound: f64) {
     let mut w = world(text);
     let mut exec = Inline::default();
     let mut watch = Watch::new(&w);
-    let n = w.bodies.len();
+    let n = w.state.bodies.len();
     let mut deepest: f64 = 0.0;
-    while w.time() < 20.0 - 1e-9 && !(w.steps > 0 && w.at_rest()) {
+    while w.time() < 20.0 - 1e-9 && !(w.state.steps > 0 && w.at_rest()) {
         watch.step(&mut w, &mut exec);
         for i in 1..n {
-            let p = w.bodies[i].state.position;
-            if w.bodies[i].activity != Activity::Fallen && p.x.abs() < 0.95 && p.y.abs() < 0.95 {
+            let p = w.state.bodies[i].state.position;
+            if w.state.bodies[i].activity != Activity::Fallen
+                && p.x.abs() < 0.95
+                && p.y.abs() < 0.95
+            {
                 deepest = deepest.min(lowest(&w, i));
             }
         }
     }
     let fallen: Vec<usize> = (1..n)
-        .filter(|&i| w.bodies[i].activity == Activity::Fallen)
+        .filter(|&i| w.state.bodies[i].activity == Activity::Fallen)
         .collect();
     println!(
         "50 nuts and bolts: rest at {} s, {} fell off, deepest point over the floor {deepest:.1e} m, \
          penetration {:.1e} m, accepted overlaps {}, energy gain {:.1e} J (E0 {:.3} J)",
         w.time(),
         fallen.len(),
-        w.max_penetration,
-        w.counters.overlaps_accepted,
+        w.diagnostics.max_penetration,
+        w.diagnostics.counters.overlaps_accepted,
         watch.gain,
         watch.e0
     );
     assert!(w.at_rest(), "not at rest after 20 s");
     for &i in &fallen {
-        let p = w.bodies[i].state.position;
+        let p = w.state.bodies[i].state.position;
         assert!(
             p.x.abs() > 0.98 || p.y.abs() > 0.98,
             "body {i} fell through the floor at {p:?}"
@@ -1190,10 +1205,10 @@ fn run_random_scene(bodies: &[RandomBody]) -> Option<RandomOutcome> {
     let mut exec = Inline::default();
     let mut watch = Watch::new(&w);
     let mut out = RandomOutcome {
-        scale: (6..w.bodies.len())
+        scale: (6..w.state.bodies.len())
             .map(|i| {
                 let o = w.object(i);
-                w.bodies[i].kinetic_energy(o) + o.mass * G * HEIGHT
+                w.state.bodies[i].kinetic_energy(o) + o.mass * G * HEIGHT
             })
             .sum(),
         escape: f64::NEG_INFINITY,
@@ -1201,7 +1216,7 @@ fn run_random_scene(bodies: &[RandomBody]) -> Option<RandomOutcome> {
     };
     while w.time() < 2.0 - 1e-9 {
         watch.step(&mut w, &mut exec);
-        for i in 6..w.bodies.len() {
+        for i in 6..w.state.bodies.len() {
             for v in vertices(&w, i) {
                 let out_by = (v.x.abs() - HALF_INNER)
                     .max(v.y.abs() - HALF_INNER)
@@ -1211,13 +1226,13 @@ fn run_random_scene(bodies: &[RandomBody]) -> Option<RandomOutcome> {
             }
         }
     }
-    out.penetration = w.max_penetration;
+    out.penetration = w.diagnostics.max_penetration;
     out.gain = watch.gain;
     out.rise = watch.rise;
     out.rise_at = watch.rise_at;
-    out.accepted = w.counters.overlaps_accepted;
-    out.toi_events = w.counters.toi_events;
-    out.lcp_failures = w.counters.solve.failed as usize;
+    out.accepted = w.diagnostics.counters.overlaps_accepted;
+    out.toi_events = w.diagnostics.counters.toi_events;
+    out.lcp_failures = w.diagnostics.counters.solve.failed as usize;
     out.first_over = watch.first_over;
     // STRESS_DUMP=DIR keeps a scene whose overlap went past the tolerance or
     // that gained energy (with its hull files) for replay with the binary.
@@ -1351,10 +1366,10 @@ fn replay(dir: &str) -> (World, Watch, f64) {
     )
     .unwrap_or_else(|e| panic!("{e}"));
     let mut w = World::new(scene);
-    let scale: f64 = (6..w.bodies.len())
+    let scale: f64 = (6..w.state.bodies.len())
         .map(|i| {
             let o = w.object(i);
-            w.bodies[i].kinetic_energy(o) + o.mass * G * HEIGHT
+            w.state.bodies[i].kinetic_energy(o) + o.mass * G * HEIGHT
         })
         .sum();
     let mut exec = Inline::default();
@@ -1363,11 +1378,11 @@ fn replay(dir: &str) -> (World, Watch, f64) {
     println!(
         "{dir}: penetration {:.3e} m (over 10 µm from t = {:?}), {} TOI events (at most {} in a \
          step), {} overlaps accepted, energy gain {:.3e} J, largest one-step rise {:.3e} J at t = {:.2} s (scale {:.1} J)",
-        w.max_penetration,
+        w.diagnostics.max_penetration,
         watch.first_over,
-        w.counters.toi_events,
-        w.counters.max_events_in_step,
-        w.counters.overlaps_accepted,
+        w.diagnostics.counters.toi_events,
+        w.diagnostics.counters.max_events_in_step,
+        w.diagnostics.counters.overlaps_accepted,
         watch.gain,
         watch.rise,
         watch.rise_at,
@@ -1412,9 +1427,9 @@ fn light_spinning_hulls_use_up_the_event_budget_and_overlap() {
     let (w, _, _) = replay("stress_event_budget_overlap");
     assert_penetration(&w, CONTACT_TOLERANCE, "event budget");
     assert!(
-        w.counters.max_events_in_step <= 64,
+        w.diagnostics.counters.max_events_in_step <= 64,
         "{} impact events in one step",
-        w.counters.max_events_in_step
+        w.diagnostics.counters.max_events_in_step
     );
 }
 
@@ -1493,7 +1508,10 @@ fn prism_spinning_on_a_corner_gains_nothing_from_its_resting_force() {
 #[test]
 fn seed_two_scene_79_accepts_no_overlap() {
     let (w, _, _) = replay("stress_accepted_overlap_seed2");
-    assert_eq!(w.counters.overlaps_accepted, 0, "overlaps accepted");
+    assert_eq!(
+        w.diagnostics.counters.overlaps_accepted, 0,
+        "overlaps accepted"
+    );
     assert_penetration(&w, CONTACT_TOLERANCE, "seed 2 scene 79");
 }
 
@@ -1505,7 +1523,10 @@ fn seed_two_scene_79_accepts_no_overlap() {
 #[test]
 fn seed_three_scene_169_stays_within_the_tolerance() {
     let (w, _, _) = replay("stress_tolerance_ratchet_seed3");
-    assert_eq!(w.counters.overlaps_accepted, 0, "overlaps accepted");
+    assert_eq!(
+        w.diagnostics.counters.overlaps_accepted, 0,
+        "overlaps accepted"
+    );
     assert_penetration(&w, CONTACT_TOLERANCE, "seed 3 scene 169");
 }
 
@@ -1519,11 +1540,14 @@ fn seed_three_scene_169_stays_within_the_tolerance() {
 #[test]
 fn body_touching_a_wall_does_not_exhaust_the_event_budget() {
     let (w, _, _) = replay("stress_touching_wall_event_budget");
-    assert_eq!(w.counters.overlaps_accepted, 0, "overlaps accepted");
+    assert_eq!(
+        w.diagnostics.counters.overlaps_accepted, 0,
+        "overlaps accepted"
+    );
     assert!(
-        w.counters.max_events_in_step < EVENTS_PER_BODY as u64 / 4,
+        w.diagnostics.counters.max_events_in_step < EVENTS_PER_BODY as u64 / 4,
         "{} events in one step",
-        w.counters.max_events_in_step
+        w.diagnostics.counters.max_events_in_step
     );
     assert_penetration(&w, CONTACT_TOLERANCE, "seed 4 scene 89");
 }

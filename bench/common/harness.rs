@@ -53,7 +53,7 @@ pub struct Rigidsim {
 impl Rigidsim {
     pub fn new(scene: Scene, resting_systems: bool) -> Rigidsim {
         let mut world = World::new(scene);
-        world.switches.sleep_enabled = resting_systems;
+        world.settings.sleep_enabled = resting_systems;
         Rigidsim {
             world,
             exec: Inline::default(),
@@ -67,7 +67,7 @@ impl Engine for Rigidsim {
     }
     fn snaps(&self, out: &mut Vec<Snap>) {
         out.clear();
-        for (i, b) in self.world.bodies.iter().enumerate() {
+        for (i, b) in self.world.state.bodies.iter().enumerate() {
             out.push(Snap {
                 position: b.state.position,
                 orientation: b.state.orientation,

@@ -38,7 +38,7 @@ pub enum Request {
     /// `time_of_impact` stage: these interaction groups (one chunk of the
     /// stage's, largest first), each stepped whole (`step::run_group`: its
     /// end-of-step results, impact events, re-solves), with the step's
-    /// start time and switches. The worker runs their narrowphase batches
+    /// start time and step settings. The worker runs their narrowphase batches
     /// and island solves itself.
     StepGroups {
         params: GroupParams,

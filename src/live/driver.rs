@@ -143,7 +143,7 @@ impl LiveDriver {
         hand: u32,
         input: Input,
     ) -> Result<Option<&'static str>, RunError> {
-        let step = world.steps;
+        let step = world.state.steps;
         let mut end = None;
         let mut local = None;
         match &input {
@@ -184,6 +184,7 @@ impl LiveDriver {
         }
         self.last_state = Some(Instant::now());
         let bodies: Vec<[f32; 7]> = world
+            .state
             .bodies
             .iter()
             .map(|b| {
@@ -193,6 +194,7 @@ impl LiveDriver {
             .collect();
         let with = |a: Activity| {
             world
+                .state
                 .bodies
                 .iter()
                 .enumerate()
@@ -203,7 +205,7 @@ impl LiveDriver {
         let state = State {
             kind: "state",
             t: world.time(),
-            step: world.steps,
+            step: world.state.steps,
             bodies: &bodies,
             resting: with(Activity::Sleeping),
             fallen: with(Activity::Fallen),
@@ -223,7 +225,7 @@ impl LiveDriver {
             tx.send_replace(text.into());
         }
         let mut facts = self.shared.facts.lock().unwrap();
-        for (f, b) in facts.bodies.iter_mut().zip(&world.bodies) {
+        for (f, b) in facts.bodies.iter_mut().zip(&world.state.bodies) {
             f.centre = b.state.position;
         }
     }
@@ -246,7 +248,7 @@ impl Driver for LiveDriver {
         for r in std::mem::take(&mut self.again) {
             self.hands.apply(world, r.hand, &r.input);
         }
-        if world.steps == 0 || self.last_state.is_none() {
+        if world.state.steps == 0 || self.last_state.is_none() {
             self.pacer.resume(world.time());
             self.publish(world, true);
         }
@@ -278,9 +280,13 @@ impl Driver for LiveDriver {
     }
 
     fn finish(&mut self, world: &World, end_reason: &str) -> Result<Vec<String>, RunError> {
-        writeln!(self.record, "{}", inputs::end_line(world.steps, end_reason))
-            .and_then(|()| self.record.flush())
-            .map_err(|e| self.io(e))?;
+        writeln!(
+            self.record,
+            "{}",
+            inputs::end_line(world.state.steps, end_reason)
+        )
+        .and_then(|()| self.record.flush())
+        .map_err(|e| self.io(e))?;
         self.publish(world, true);
         if let Some(tx) = self.states.take() {
             tx.send_replace(protocol::end_message(end_reason).into());

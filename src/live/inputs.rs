@@ -24,7 +24,7 @@ use std::path::Path;
 /// The file name in the output folder.
 pub const FILE_NAME: &str = "inputs.jsonl";
 
-/// One input with the step boundary it took effect at (`World::steps` then)
+/// One input with the step boundary it took effect at (`WorldState::steps` then)
 /// and the hand (connection) that sent it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Record {
@@ -168,7 +168,7 @@ impl Hands {
     pub fn apply(&mut self, world: &mut World, hand: u32, input: &Input) -> Option<[f64; 3]> {
         match input {
             Input::Grab { body, point } => {
-                let s = &world.bodies[*body as usize].state;
+                let s = &world.state.bodies[*body as usize].state;
                 let point = Vector3::from(*point);
                 let local = s.orientation.inverse() * (point - s.position);
                 self.grabs.insert(
@@ -246,7 +246,7 @@ impl Hands {
         // The step's own interval, its ends as `World::time` gives them:
         // a window left with the workers never acts in a later step.
         let start = world.time();
-        let end = (world.steps + 1) as f64 * dt;
+        let end = (world.state.steps + 1) as f64 * dt;
         let mut forces = self.own.clone();
         let window = |body: u32, force, torque| ForceWindow {
             body: BodyId(body),
@@ -256,7 +256,7 @@ impl Hands {
             end,
         };
         for g in self.grabs.values() {
-            let b = &world.bodies[g.body as usize];
+            let b = &world.state.bodies[g.body as usize];
             if !b.is_dynamic() || b.activity == Activity::Fallen {
                 continue;
             }
@@ -272,7 +272,7 @@ impl Hands {
             forces.push(window(g.body, f, tau));
         }
         for (body, point, impulse) in self.pushes.drain(..) {
-            let b = &world.bodies[body as usize];
+            let b = &world.state.bodies[body as usize];
             if b.activity == Activity::Fallen {
                 continue;
             }
@@ -301,12 +301,12 @@ impl Hands {
 /// over), with the run's step count, settings, counters and timings.
 pub fn reset(world: &mut World) {
     let mut fresh = World::new(world.scene.clone());
-    fresh.steps = world.steps;
-    fresh.switches = world.switches;
-    fresh.stage = std::mem::take(&mut world.stage);
-    fresh.counters = std::mem::take(&mut world.counters);
-    fresh.max_penetration = world.max_penetration;
-    fresh.fallen = std::mem::take(&mut world.fallen);
+    fresh.state.steps = world.state.steps;
+    fresh.settings = world.settings;
+    fresh.diagnostics.stage = std::mem::take(&mut world.diagnostics.stage);
+    fresh.diagnostics.counters = std::mem::take(&mut world.diagnostics.counters);
+    fresh.diagnostics.max_penetration = world.diagnostics.max_penetration;
+    fresh.state.fallen = std::mem::take(&mut world.state.fallen);
     *world = fresh;
 }
 

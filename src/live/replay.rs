@@ -59,13 +59,13 @@ impl Driver for Replay {
         // Inputs before the first boundary this run sees (a resumed run's
         // checkpoint) acted in the run it continues: only the hands they
         // left holding are taken up.
-        while self.next < records.len() && records[self.next].step < world.steps {
+        while self.next < records.len() && records[self.next].step < world.state.steps {
             if !self.hands.restore(&records[self.next]) {
                 self.unheld += 1;
             }
             self.next += 1;
         }
-        while self.next < records.len() && records[self.next].step == world.steps {
+        while self.next < records.len() && records[self.next].step == world.state.steps {
             let r = &records[self.next];
             self.hands.apply(world, r.hand, &r.input);
             self.next += 1;
@@ -79,7 +79,7 @@ impl Driver for Replay {
     /// (a reset before a stop acted on the state it ended with).
     fn at_end(&mut self, world: &mut World) {
         let records = &self.recording.records;
-        while self.next < records.len() && records[self.next].step == world.steps {
+        while self.next < records.len() && records[self.next].step == world.state.steps {
             let r = &records[self.next];
             self.hands.apply(world, r.hand, &r.input);
             self.next += 1;

@@ -4,7 +4,7 @@
 //! fixtures (`tests/data/islands/`) and its benchmark (`benches/islands.rs`).
 //!
 //! A test aid kept out of the simulation's data: the step only keeps a
-//! copy of the islands it builds (`StepSwitches::capture_min_rows`), and
+//! copy of the islands it builds (`StepSettings::capture_min_rows`), and
 //! the rank that built them writes them here after the step: rank 0 after
 //! each world step (`run`), a worker after each group step it ran
 //! (`cluster::worker_loop`). So the files, not the run, depend on where
@@ -41,7 +41,7 @@ pub fn start(dir: PathBuf, min_rows: usize, rank: i32) -> std::io::Result<()> {
 }
 
 /// The smallest island (rows) to capture, if capturing: what the step is
-/// asked to keep (`StepSwitches::capture_min_rows`).
+/// asked to keep (`StepSettings::capture_min_rows`).
 pub fn min_rows() -> Option<usize> {
     if !ON.load(Ordering::Relaxed) {
         return None;

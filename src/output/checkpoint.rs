@@ -39,14 +39,14 @@ use super::{FNV_OFFSET, fnv1a, write_atomic};
 use crate::body::{Activity, Body, BodyId};
 use crate::collision::narrowphase::CachedFeatures;
 use crate::scene::Scene;
-use crate::step::{Counters, Fall, StageSeconds, Touching, WarmContact, World};
+use crate::step::{Counters, Fall, Touching, WarmContact, World, WorldState};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// Bump when `Checkpoint` changes shape; older files are then refused by name.
 /// 7: the counters of interaction groups (`groups`, `largest_group`,
-/// `group_reruns`). 8: the time each fallen body fell (`World::fallen`).
+/// `group_reruns`). 8: the time each fallen body fell (`WorldState::fallen`).
 /// 9: the solver's system sizes and sweeps (`SolveStats::iterative_sweeps`,
 /// `largest_rows`, `large_systems`). 10: the solver's worst violation
 /// (`SolveStats::worst_violation`). 11: the interior-point solves
@@ -171,7 +171,8 @@ pub fn scene_fingerprint(scene: &Scene) -> u64 {
 impl World {
     /// The full state after the last completed step.
     pub fn checkpoint(&self) -> Checkpoint {
-        let mut features: Vec<_> = self.features.iter().map(|(k, v)| (*k, v.clone())).collect();
+        let (s, d) = (&self.state, &self.diagnostics);
+        let mut features: Vec<_> = s.features.iter().map(|(k, v)| (*k, v.clone())).collect();
         features.sort_unstable_by_key(|(k, _)| *k);
         Checkpoint {
             scene_name: self.scene.name.clone(),
@@ -180,20 +181,20 @@ impl World {
             dt: self.scene.settings.dt,
             speculative_speed: self.scene.settings.speculative_speed(),
             pile_bodies: self.scene.settings.pile_bodies,
-            steps: self.steps,
-            bodies: self.bodies.clone(),
-            counters: self.counters.clone(),
-            max_penetration: self.max_penetration,
-            fallen: self.fallen.clone(),
-            sleep_enabled: self.switches.sleep_enabled,
-            sleep_after: self.switches.sleep_after,
-            touching: self.touching.clone(),
+            steps: s.steps,
+            bodies: s.bodies.clone(),
+            counters: d.counters.clone(),
+            max_penetration: d.max_penetration,
+            fallen: s.fallen.clone(),
+            sleep_enabled: self.settings.sleep_enabled,
+            sleep_after: self.settings.sleep_after,
+            touching: s.touching.clone(),
             features,
-            sleep_timer: self.sleep_timer.clone(),
-            sleep_group: self.sleep_group.clone(),
-            last_normal_force_sum: self.last_normal_force_sum,
-            last_pair_forces: self.last_pair_forces.clone(),
-            warm: self.warm.iter().map(|(k, v)| (*k, v.clone())).collect(),
+            sleep_timer: s.sleep_timer.clone(),
+            sleep_group: s.sleep_group.clone(),
+            last_normal_force_sum: d.last_normal_force_sum,
+            last_pair_forces: d.last_pair_forces.clone(),
+            warm: s.warm.iter().map(|(k, v)| (*k, v.clone())).collect(),
             run: RunMarks::default(),
             source: PathBuf::new(),
         }
@@ -207,21 +208,24 @@ impl World {
         ck.check_bodies(&scene)?;
         ck.check_consistent()?;
         let mut w = World::new(scene);
-        w.bodies = ck.bodies;
-        w.steps = ck.steps;
-        w.stage = StageSeconds::default();
-        w.counters = ck.counters;
-        w.max_penetration = ck.max_penetration;
-        w.fallen = ck.fallen;
-        w.switches.sleep_enabled = ck.sleep_enabled;
-        w.switches.sleep_after = ck.sleep_after;
-        w.touching = ck.touching;
-        w.features = ck.features.into_iter().collect();
-        w.sleep_timer = ck.sleep_timer;
-        w.sleep_group = ck.sleep_group;
-        w.last_normal_force_sum = ck.last_normal_force_sum;
-        w.last_pair_forces = ck.last_pair_forces;
-        w.warm = ck.warm.into_iter().collect();
+        w.state = WorldState {
+            bodies: ck.bodies,
+            steps: ck.steps,
+            touching: ck.touching,
+            impacts: Vec::new(),
+            features: ck.features.into_iter().collect(),
+            sleep_timer: ck.sleep_timer,
+            sleep_group: ck.sleep_group,
+            warm: ck.warm.into_iter().collect(),
+            fallen: ck.fallen,
+        };
+        let d = &mut w.diagnostics;
+        d.counters = ck.counters;
+        d.max_penetration = ck.max_penetration;
+        d.last_normal_force_sum = ck.last_normal_force_sum;
+        d.last_pair_forces = ck.last_pair_forces;
+        w.settings.sleep_enabled = ck.sleep_enabled;
+        w.settings.sleep_after = ck.sleep_after;
         Ok(w)
     }
 }

@@ -189,7 +189,7 @@ impl Region<'_> {
                 let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
                 let rules = &self.st.settings;
                 let frame_a = pose(&seg[t.a.index()].state).inverse();
-                let mut last = if self.st.switches.warm_start {
+                let mut last = if self.st.step_settings.warm_start {
                     self.warm.get(&(t.a, t.b)).cloned().unwrap_or_default()
                 } else {
                     Vec::new()
@@ -283,13 +283,13 @@ impl Region<'_> {
                 contacts,
                 dt: h,
                 restitution_threshold,
-                iterative_min_rows: self.st.switches.iterative_min_rows as u32,
+                iterative_min_rows: self.st.step_settings.iterative_min_rows as u32,
             });
         }
         self.counters.islands += tasks.len() as u64;
         self.stage.stop(timer);
         // Kept for the caller to write (`--capture-islands`), in no stage's time.
-        if let Some(min_rows) = self.st.switches.capture_min_rows {
+        if let Some(min_rows) = self.st.step_settings.capture_min_rows {
             let large = tasks.iter().filter(|t| t.rows() >= min_rows);
             self.captured.extend(large.cloned());
         }

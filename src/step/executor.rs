@@ -8,11 +8,11 @@
 //! (`Since`).
 //!
 //! It imports no stage of `step`, only the leaves (`stats`, `timers`,
-//! `switches`, `touching`): every stage can take an `Executor` without the
+//! `settings`, `touching`): every stage can take an `Executor` without the
 //! seam importing the stages back.
 
+use super::settings::StepSettings;
 use super::stats::{Counters, Distribution, NumericalFailure, RankSummary};
-use super::switches::StepSwitches;
 use super::timers::{Stage, StageSeconds};
 use super::touching::{Touching, WarmContact};
 use crate::body::{Body, BodyId, BodyState, ObjectDef};
@@ -50,7 +50,7 @@ pub trait Executor {
     /// would hold up the ranks sharing the group steps, where splitting
     /// measures faster. The choice changes the time, not the answer: a
     /// split group ends as it would whole (`docs/architecture.md`). One
-    /// rank splits none (unless `StepSwitches::split_groups` asks for all).
+    /// rank splits none (unless `StepSettings::split_groups` asks for all).
     fn split_groups(&mut self, groups: &[(f64, usize)]) -> Vec<bool> {
         vec![false; groups.len()]
     }
@@ -75,34 +75,34 @@ pub trait Executor {
 
 /// What every region of one step reads and nothing changes: the scene's
 /// objects, settings and force windows, the step's start time, and the
-/// world's switches.
+/// world's step settings.
 pub struct StepStatic<'s> {
     pub(crate) objects: &'s [ObjectDef],
     pub(crate) settings: &'s Settings,
     pub(crate) forces: &'s [ForceWindow],
     /// Simulated time at the step's start.
     pub(crate) t0: f64,
-    pub(crate) switches: StepSwitches,
+    pub(crate) step_settings: StepSettings,
 }
 
 /// What a group's step reads besides the scene: the step's start time and
-/// the world's switches. Sent with the groups a worker steps.
+/// the world's step settings. Sent with the groups a worker steps.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct GroupParams {
     t0: f64,
-    switches: StepSwitches,
+    settings: StepSettings,
 }
 
 impl GroupParams {
-    /// A step starting at `t0` with the world's `switches`.
-    pub(crate) fn new(t0: f64, switches: StepSwitches) -> Self {
-        GroupParams { t0, switches }
+    /// A step starting at `t0` with the world's `settings`.
+    pub(crate) fn new(t0: f64, settings: StepSettings) -> Self {
+        GroupParams { t0, settings }
     }
 
     pub(crate) fn of(st: &StepStatic) -> Self {
         GroupParams {
             t0: st.t0,
-            switches: st.switches,
+            settings: st.step_settings,
         }
     }
 
@@ -113,7 +113,7 @@ impl GroupParams {
             settings: &scene.settings,
             forces: &scene.forces,
             t0: self.t0,
-            switches: self.switches,
+            step_settings: self.settings,
         }
     }
 }
@@ -251,7 +251,7 @@ impl From<GroupFailure> for NumericalFailure {
 
 /// One group's answer: its output, or where it went numerically wrong
 /// (`None` only as a placeholder while answers are gathered); and the
-/// islands its step captured (`StepSwitches::capture_min_rows`), also
+/// islands its step captured (`StepSettings::capture_min_rows`), also
 /// before a failure, for the rank that stepped it to write: they never
 /// travel (a worker's reply arrives without them).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

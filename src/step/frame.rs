@@ -47,7 +47,7 @@ pub(super) fn step_world(
         seg: solved.seg,
         end,
         pairs,
-        grown: grow(proxies, w.st.switches.group_margin),
+        grown: grow(proxies, w.st.step_settings.group_margin),
         since: solved.since,
         separating: solved.separating,
         together: solved.together,
@@ -184,7 +184,7 @@ fn solve_touching(
     )?;
     // Pairs touching now or hit during the last step ("colliding in the
     // previous frame") that now separate.
-    let previous_impacts = std::mem::take(&mut w.impacts);
+    let previous_impacts = std::mem::take(w.impacts);
     let mut separating = w.separating_pairs(&previous_impacts, &seg);
     separating.extend(w.separating_pairs(touching, &seg));
     Ok(SolvedStart {

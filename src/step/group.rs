@@ -30,7 +30,7 @@ use super::executor::{
     PreparedPairs, Segment, StepStatic,
 };
 use super::impacts::{GroupState, step_group};
-use super::region::{PairMap, Region};
+use super::region::{PairMap, Region, RegionState};
 use super::stats::{Counters, NumericalFailure};
 use super::timers::{Stage, StageSeconds};
 use super::toi::SolvedSince;
@@ -293,9 +293,7 @@ pub fn prepare_pairs(
 ) -> PreparedPairs {
     let clock = std::time::Instant::now();
     let pairs = &input.pairs[from..to];
-    let mut g = Region {
-        st,
-        ids: input.ids.clone(),
+    let mut state = RegionState {
         bodies: input.bodies.clone(),
         features: input
             .features
@@ -303,18 +301,11 @@ pub fn prepare_pairs(
             .filter(|(k, _)| pairs.binary_search(k).is_ok())
             .cloned()
             .collect(),
-        warm: BTreeMap::new(),
         sleep_timer: input.sleep_timer.clone(),
         sleep_group: input.sleep_group.clone(),
-        counters: Counters::default(),
-        stage: StageSeconds::default(),
-        impacts: Vec::new(),
-        pair_forces: BTreeMap::new(),
-        speculative_pushes: Default::default(),
-        integrated: Default::default(),
-        keep_answers: false,
-        captured: Vec::new(),
+        ..Default::default()
     };
+    let mut g = state.region(st, input.ids.clone());
     let separating: PairMap<Vector3<f64>> = input.separating.iter().cloned().collect();
     let since: SolvedSince = input.since.iter().cloned().collect();
     let results = g.narrowphase_skipping_separating(exec, pairs, &input.end, &separating);
@@ -332,8 +323,8 @@ pub fn prepare_pairs(
     PreparedPairs {
         results,
         toi,
-        counters: g.counters,
-        stage: g.stage,
+        counters: state.counters,
+        stage: state.stage,
         busy_s: clock.elapsed().as_secs_f64(),
     }
 }
@@ -365,23 +356,16 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
     let prepared_s = prepared.as_ref().map_or(0.0, |p| p.busy_s);
     let mut together = SolvedTogether::new(ids.len());
     together.record_islands(islands);
-    let mut region = Region {
-        st,
-        ids,
+    let mut owned = RegionState {
         bodies,
         features: features.into_iter().collect(),
         warm: warm.into_iter().collect(),
         sleep_timer,
         sleep_group,
-        counters: Counters::default(),
-        stage: StageSeconds::default(),
-        impacts: Vec::new(),
-        pair_forces: BTreeMap::new(),
-        speculative_pushes: Default::default(),
-        integrated: Default::default(),
-        keep_answers: keep_paths,
-        captured: Vec::new(),
+        ..Default::default()
     };
+    let mut region = owned.region(st, ids);
+    region.keep_answers = keep_paths;
     let state = GroupState {
         seg,
         end,
@@ -693,9 +677,7 @@ fn paths_meet(
             body.activity = Activity::Awake;
         }
     }
-    let mut g = Region {
-        st,
-        ids: vec![a, b],
+    let mut state = RegionState {
         bodies,
         features: world
             .features
@@ -703,18 +685,11 @@ fn paths_meet(
             .map(|f| ((0, 1), f.clone()))
             .into_iter()
             .collect(),
-        warm: BTreeMap::new(),
         sleep_timer: vec![world.sleep_timer[a as usize], world.sleep_timer[b as usize]],
         sleep_group: vec![world.sleep_group[a as usize], world.sleep_group[b as usize]],
-        counters: Counters::default(),
-        stage: StageSeconds::default(),
-        impacts: Vec::new(),
-        pair_forces: BTreeMap::new(),
-        speculative_pushes: Default::default(),
-        integrated: Default::default(),
-        keep_answers: false,
-        captured: Vec::new(),
+        ..Default::default()
     };
+    let mut g = state.region(st, vec![a, b]);
     let since: SolvedSince = start
         .since
         .get(&(a, b))
@@ -751,9 +726,9 @@ fn paths_meet(
         }
         result = Some(r);
     }
-    done.counters.add(&g.counters);
+    done.counters.add(&state.counters);
     done.stage
-        .add(&g.stage, &[Stage::Narrowphase, Stage::Broadphase]);
+        .add(&state.stage, &[Stage::Narrowphase, Stage::Broadphase]);
     result
 }
 
@@ -797,7 +772,7 @@ pub(crate) fn step_groups<'s>(
     let whole = plan_groups(world, start);
     // `--split-groups` splits them all; otherwise the executor chooses
     // (and measures its choice).
-    let chosen = if st.switches.split_groups {
+    let chosen = if st.step_settings.split_groups {
         vec![true; whole.len()]
     } else {
         exec.split_groups(

@@ -343,7 +343,7 @@ pub(crate) fn step_group(
             s.as_ref().map(|(s, _, _)| {
                 s.iter()
                     .map(|p| SphereProxy {
-                        radius: p.radius * (1.0 + g.st.switches.group_margin),
+                        radius: p.radius * (1.0 + g.st.step_settings.group_margin),
                         ..*p
                     })
                     .collect()
@@ -490,7 +490,14 @@ pub(crate) fn step_group(
         for (k, r) in group_pairs.iter().zip(&at_tau) {
             let deepest = if r.penetrating { r.depth } else { 0.0 };
             let touched = !r.contacts.is_empty();
-            since.insert(*k, Since { time: tau, deepest, touched });
+            since.insert(
+                *k,
+                Since {
+                    time: tau,
+                    deepest,
+                    touched,
+                },
+            );
         }
         let touching_now = g.touching_from(&group_pairs, &at_tau);
         let woken = g.wake_touched(&touching_now, &mut seg, tau, t0);
@@ -557,16 +564,16 @@ pub(crate) fn step_group(
     Ok(GroupOutput {
         paths,
         ids: take(&mut g.ids),
-        bodies: take(&mut g.bodies),
-        sleep_timer: take(&mut g.sleep_timer),
+        bodies: take(g.bodies),
+        sleep_timer: take(g.sleep_timer),
         end,
         pairs,
         results,
-        warm: take(&mut g.warm).into_iter().collect(),
-        impacts: take(&mut g.impacts),
+        warm: take(g.warm).into_iter().collect(),
+        impacts: take(g.impacts),
         pair_forces: take(&mut g.pair_forces).into_iter().collect(),
-        counters: take(&mut g.counters),
-        stage: take(&mut g.stage),
+        counters: take(g.counters),
+        stage: take(g.stage),
         events: events as u64,
         pieces,
         busy_s: 0.0,

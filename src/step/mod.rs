@@ -33,9 +33,9 @@ mod group;
 mod impacts;
 mod kept;
 mod region;
+mod settings;
 mod sleep;
 pub mod stats;
-mod switches;
 mod timers;
 mod toi;
 mod touching;
@@ -48,9 +48,9 @@ pub use executor::{
 };
 pub use group::{SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group};
 pub use impacts::EVENTS_PER_BODY;
+pub use settings::{GROUP_MARGIN, StepSettings};
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
 pub use stats::{Counters, NumericalFailure};
-pub use switches::{GROUP_MARGIN, StepSwitches};
 pub use timers::{Stage, StageSeconds};
 pub use toi::{RATCHET_GAP, TOI_GAP};
 pub(crate) use touching::{Touching, WarmContact};
@@ -158,88 +158,126 @@ pub struct Fall {
     pub time: f64,
 }
 
-/// The simulated world: static scene data plus the changing state.
+/// The simulated world: the static scene, the state each step changes, how
+/// the step works, and what the steps measured.
 pub struct World {
     pub scene: Scene,
+    pub state: WorldState,
+    /// How the run asks the step to work.
+    pub settings: StepSettings,
+    pub diagnostics: Diagnostics,
+}
+
+/// What a step changes and the next step reads. All of it but `impacts`
+/// is checkpointed (`output::checkpoint`).
+pub struct WorldState {
     pub bodies: Vec<Body>,
     /// Completed steps; time = steps × dt exactly (no accumulated rounding).
     pub steps: u64,
+    /// The contacts touching at the end of the last step: the next step's
+    /// `build_islands` starts from them.
+    pub(crate) touching: Vec<Touching>,
+    /// Contacts of the impacts solved during the last step, for the
+    /// separating-pair skip (only an optimisation: not checkpointed).
+    pub(crate) impacts: Vec<Touching>,
+    /// V-Clip's cached closest features per pair (warm starts of queries).
+    pub(crate) features: region::PairMap<Vec<CachedFeatures>>,
+    /// Seconds each body has been slow (it may rest after
+    /// `StepSettings::sleep_after`).
+    pub(crate) sleep_timer: Vec<f64>,
+    /// Resting system a sleeping body belongs to (its lowest body id).
+    pub(crate) sleep_group: Vec<u32>,
+    /// Resting forces of the last solve of each touching pair (warm start).
+    pub(crate) warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
+    /// The bodies that fell below `fall_z`, in the order they fell (by
+    /// body id within a step).
+    pub fallen: Vec<Fall>,
+}
+
+/// What the steps measured, for the summary, the tests and the schedule:
+/// no body's motion depends on it. The counters, the largest penetration
+/// and the last forces are checkpointed so that a resumed run's summary
+/// reads like an uninterrupted one.
+#[derive(Default)]
+pub struct Diagnostics {
+    /// Wall seconds per stage.
     pub stage: StageSeconds,
     pub counters: Counters,
     /// Largest overlap seen at the end of any step, metres.
     pub max_penetration: f64,
-    /// The bodies that fell below `fall_z`, in the order they fell (by
-    /// body id within a step).
-    pub fallen: Vec<Fall>,
-    /// How the run asks the step to work (`StepSwitches`).
-    pub switches: StepSwitches,
-    pub(crate) touching: Vec<Touching>,
-    /// Contacts of the impacts solved during the last step, for the
-    /// separating-pair skip (only an optimisation: not checkpointed).
-    impacts: Vec<Touching>,
-    /// What the group steps cost (the schedule's prediction; never part of
-    /// a result, not checkpointed).
-    group_work: GroupWork,
-    pub(crate) features: region::PairMap<Vec<CachedFeatures>>,
-    pub(crate) sleep_timer: Vec<f64>,
-    /// Resting system a sleeping body belongs to (its lowest body id).
-    pub(crate) sleep_group: Vec<u32>,
     /// Total resting normal force of the last contact solve, and the force
-    /// on each touching body pair (a, b, newtons), for tests and diagnostics.
+    /// on each touching body pair (a, b, newtons).
     pub last_normal_force_sum: f64,
     pub last_pair_forces: Vec<(BodyId, BodyId, f64)>,
-    /// Resting forces of the last solve of each touching pair (warm start).
-    pub(crate) warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
     /// Copies of the islands the last step built of
-    /// `switches.capture_min_rows` rows or more, in the order it built them
-    /// (those of the group steps run on this rank included), for the caller
-    /// to write (`--capture-islands`); empty unless asked for.
+    /// `StepSettings::capture_min_rows` rows or more, in the order it built
+    /// them (those of the group steps run on this rank included), for the
+    /// caller to write (`--capture-islands`); empty unless asked for.
     pub captured_islands: Vec<IslandTask>,
+    /// What the group steps cost (the schedule's prediction; not
+    /// checkpointed).
+    group_work: GroupWork,
+}
+
+impl WorldState {
+    /// The scene's bodies at t = 0: nothing touching, nothing cached,
+    /// each body its own resting system.
+    fn new(bodies: Vec<Body>) -> WorldState {
+        let n = bodies.len();
+        WorldState {
+            bodies,
+            steps: 0,
+            touching: Vec::new(),
+            impacts: Vec::new(),
+            features: Default::default(),
+            sleep_timer: vec![0.0; n],
+            sleep_group: (0..n as u32).collect(),
+            warm: BTreeMap::new(),
+            fallen: Vec::new(),
+        }
+    }
+}
+
+impl Diagnostics {
+    /// Nothing measured yet, for a world of `n` bodies.
+    fn new(n: usize) -> Diagnostics {
+        Diagnostics {
+            group_work: GroupWork::new(n),
+            ..Default::default()
+        }
+    }
 }
 
 impl World {
     pub fn new(scene: Scene) -> World {
         let n = scene.bodies.len();
-        let bodies = scene.bodies.clone();
+        let state = WorldState::new(scene.bodies.clone());
         World {
             scene,
-            bodies,
-            steps: 0,
-            stage: StageSeconds::default(),
-            counters: Counters::default(),
-            max_penetration: 0.0,
-            fallen: Vec::new(),
-            switches: StepSwitches::default(),
-            touching: Vec::new(),
-            impacts: Vec::new(),
-            group_work: GroupWork::new(n),
-            features: Default::default(),
-            sleep_timer: vec![0.0; n],
-            sleep_group: (0..n as u32).collect(),
-            last_normal_force_sum: 0.0,
-            last_pair_forces: Vec::new(),
-            warm: BTreeMap::new(),
-            captured_islands: Vec::new(),
+            state,
+            settings: StepSettings::default(),
+            diagnostics: Diagnostics::new(n),
         }
     }
 
     /// What the run's group steps have cost so far.
     pub fn group_work(&self) -> &GroupWork {
-        &self.group_work
+        &self.diagnostics.group_work
     }
 
     pub fn time(&self) -> f64 {
-        self.steps as f64 * self.scene.settings.dt
+        self.state.steps as f64 * self.scene.settings.dt
     }
 
     pub fn object(&self, body: usize) -> &ObjectDef {
-        &self.scene.objects[self.bodies[body].object.0 as usize]
+        &self.scene.objects[self.state.bodies[body].object.0 as usize]
     }
 
     /// Kinetic plus gravitational potential energy of the dynamic bodies still simulated.
     pub fn energy(&self) -> f64 {
         let g = self.scene.settings.gravity;
-        self.bodies
+        self.state
+            .bodies
             .iter()
             .filter(|b| b.is_dynamic() && b.activity != Activity::Fallen)
             .map(|b| {
@@ -251,7 +289,7 @@ impl World {
 
     /// True when every dynamic body rests or has fallen off.
     pub fn at_rest(&self) -> bool {
-        self.bodies.iter().all(|b| match b.kind {
+        self.state.bodies.iter().all(|b| match b.kind {
             BodyKind::Dynamic => b.activity != Activity::Awake,
             BodyKind::Fixed => true,
             BodyKind::Driven {
@@ -261,58 +299,52 @@ impl World {
         })
     }
 
-    /// Advances the world by one step of `dt`.
+    /// Advances the world by one step of `dt`. The world-wide stages
+    /// borrow its state; also after a numerical failure the world keeps
+    /// what the step left (the states are those before the failing stage).
     pub fn step(&mut self, exec: &mut dyn Executor) -> Result<(), NumericalFailure> {
-        let t0 = self.time();
-        let n = self.bodies.len();
-        let st = GroupParams::new(t0, self.switches).statics(&self.scene);
-        use std::mem::take;
+        let st = GroupParams::new(self.time(), self.settings).statics(&self.scene);
+        let (s, d) = (&mut self.state, &mut self.diagnostics);
+        let first = s.steps == 0;
+        let fallen_before = d.counters.bodies_fallen;
         let mut world = Region {
             st: &st,
-            ids: (0..n as u32).collect(),
-            bodies: take(&mut self.bodies),
-            features: take(&mut self.features),
-            warm: take(&mut self.warm),
-            sleep_timer: take(&mut self.sleep_timer),
-            sleep_group: take(&mut self.sleep_group),
-            counters: take(&mut self.counters),
-            stage: take(&mut self.stage),
-            impacts: take(&mut self.impacts),
+            ids: (0..s.bodies.len() as u32).collect(),
+            bodies: &mut s.bodies,
+            features: &mut s.features,
+            warm: &mut s.warm,
+            sleep_timer: &mut s.sleep_timer,
+            sleep_group: &mut s.sleep_group,
+            impacts: &mut s.impacts,
+            counters: &mut d.counters,
+            stage: &mut d.stage,
             pair_forces: BTreeMap::new(),
-            speculative_pushes: Default::default(),
+            speculative_pushes: BTreeSet::new(),
             integrated: Default::default(),
             keep_answers: false,
             captured: Vec::new(),
         };
-        let first = self.steps == 0;
-        let fallen_before = world.counters.bodies_fallen;
         let result = frame::step_world(
             &mut world,
-            &mut self.touching,
+            &mut s.touching,
             first,
             exec,
-            &mut self.max_penetration,
-            &mut self.steps,
-            &mut self.group_work,
+            &mut d.max_penetration,
+            &mut s.steps,
+            &mut d.group_work,
         );
-        // Back into the world, also after a numerical failure (the run
-        // keeps what it has: the states are those before the failing stage).
-        self.bodies = world.bodies;
-        self.features = world.features;
-        self.warm = world.warm;
-        self.sleep_timer = world.sleep_timer;
-        self.sleep_group = world.sleep_group;
-        self.counters = world.counters;
-        self.stage = world.stage;
-        self.impacts = world.impacts;
-        self.captured_islands = world.captured;
-        self.last_normal_force_sum = world.pair_forces.values().sum();
-        self.last_pair_forces = world
-            .pair_forces
+        let Region {
+            pair_forces,
+            captured,
+            ..
+        } = world;
+        d.captured_islands = captured;
+        d.last_normal_force_sum = pair_forces.values().sum();
+        d.last_pair_forces = pair_forces
             .into_iter()
             .map(|((a, b), f)| (a, b, f))
             .collect();
-        if self.counters.bodies_fallen > fallen_before {
+        if d.counters.bodies_fallen > fallen_before {
             self.record_falls();
         }
         result
@@ -322,12 +354,13 @@ impl World {
     /// `fall_z` (`Region::update_rest_and_falls`, at the step's end, counts
     /// each in `bodies_fallen` as it marks it fallen).
     fn record_falls(&mut self) {
-        let known: BTreeSet<BodyId> = self.fallen.iter().map(|f| f.body).collect();
         let time = self.time();
-        for (i, b) in self.bodies.iter().enumerate() {
+        let s = &mut self.state;
+        let known: BTreeSet<BodyId> = s.fallen.iter().map(|f| f.body).collect();
+        for (i, b) in s.bodies.iter().enumerate() {
             let body = BodyId(i as u32);
             if b.activity == Activity::Fallen && !known.contains(&body) {
-                self.fallen.push(Fall { body, time });
+                s.fallen.push(Fall { body, time });
             }
         }
     }
@@ -341,7 +374,7 @@ impl World {
                 h = h.wrapping_mul(0x0000_0100_0000_01b3);
             }
         };
-        for b in &self.bodies {
+        for b in &self.state.bodies {
             let s = &b.state;
             s.position.iter().for_each(|&x| eat(x));
             s.orientation.coords.iter().for_each(|&x| eat(x));
@@ -353,6 +386,6 @@ impl World {
 
     /// World point helper for tests.
     pub fn world_point(&self, body: usize, local: Vector3<f64>) -> Vector3<f64> {
-        (self.bodies[body].pose() * Point3::from(local)).coords
+        (self.state.bodies[body].pose() * Point3::from(local)).coords
     }
 }

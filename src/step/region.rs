@@ -6,6 +6,10 @@
 //! Local index `i` is body `ids[i]` of the world; `ids` is increasing, so
 //! every tie-break on local pair keys orders pairs exactly as on world ids,
 //! and a group's result never depends on which other bodies the world holds.
+//!
+//! A region borrows the state it changes: the world's, for the step, in the
+//! world-wide stages (`World::step`); a `RegionState` of its own, cut from
+//! the world's, in a group's step (`group`).
 
 use super::executor::{Executor, PairKey, Segment, StepStatic};
 use super::kept::{self, Kept};
@@ -31,24 +35,27 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 /// depends on a map's order.
 pub(crate) type PairMap<V> = HashMap<PairKey, V, FxBuildHasher>;
 
-/// The changing state of a set of bodies (see the module comment).
+/// The stages' view of a set of bodies (see the module comment): the
+/// state they change, borrowed from its owner (the world's `WorldState`
+/// and `Diagnostics` for the world-wide stages, a `RegionState` for a
+/// group), and what the region gathers within the step.
 pub(crate) struct Region<'s> {
     pub st: &'s StepStatic<'s>,
     /// World id of each local body, increasing.
     pub ids: Vec<u32>,
-    pub bodies: Vec<Body>,
+    pub bodies: &'s mut Vec<Body>,
     /// V-Clip's cached closest features per pair (warm starts of queries).
-    pub features: PairMap<Vec<CachedFeatures>>,
+    pub features: &'s mut PairMap<Vec<CachedFeatures>>,
     /// Resting forces of the last solve of each touching pair (warm start).
-    pub warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
-    pub sleep_timer: Vec<f64>,
+    pub warm: &'s mut BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
+    pub sleep_timer: &'s mut Vec<f64>,
     /// Resting system a sleeping body belongs to (its lowest world id).
-    pub sleep_group: Vec<u32>,
-    pub counters: Counters,
-    pub stage: StageSeconds,
+    pub sleep_group: &'s mut Vec<u32>,
     /// Contacts of the impacts solved in this step (the next step's
     /// separating-pair skip).
-    pub impacts: Vec<Touching>,
+    pub impacts: &'s mut Vec<Touching>,
+    pub counters: &'s mut Counters,
+    pub stage: &'s mut StageSeconds,
     /// Total resting normal force on each pair in its latest solve.
     pub pair_forces: BTreeMap<(BodyId, BodyId), f64>,
     /// Pairs a speculative contact pushed on in this step (it held a
@@ -61,9 +68,47 @@ pub(crate) struct Region<'s> {
     /// for a later run of the same events (`super::kept`): a part of a
     /// split group, which may step again merged with the parts it met.
     pub keep_answers: bool,
-    /// Copies of the islands it built of `StepSwitches::capture_min_rows`
+    /// Copies of the islands it built of `StepSettings::capture_min_rows`
     /// rows or more, in the order it built them (empty unless asked for).
     pub captured: Vec<IslandTask>,
+}
+
+/// The state a group's region changes, owned: cut from the world's
+/// (`group::group_input`) on whichever rank steps the group.
+#[derive(Default)]
+pub(crate) struct RegionState {
+    pub bodies: Vec<Body>,
+    pub features: PairMap<Vec<CachedFeatures>>,
+    pub warm: BTreeMap<(BodyId, BodyId), Vec<WarmContact>>,
+    pub sleep_timer: Vec<f64>,
+    pub sleep_group: Vec<u32>,
+    pub impacts: Vec<Touching>,
+    pub counters: Counters,
+    pub stage: StageSeconds,
+}
+
+impl RegionState {
+    /// The region of bodies `ids` (world ids, increasing) over this state,
+    /// with nothing yet gathered in the step.
+    pub fn region<'s>(&'s mut self, st: &'s StepStatic<'s>, ids: Vec<u32>) -> Region<'s> {
+        Region {
+            st,
+            ids,
+            bodies: &mut self.bodies,
+            features: &mut self.features,
+            warm: &mut self.warm,
+            sleep_timer: &mut self.sleep_timer,
+            sleep_group: &mut self.sleep_group,
+            impacts: &mut self.impacts,
+            counters: &mut self.counters,
+            stage: &mut self.stage,
+            pair_forces: BTreeMap::new(),
+            speculative_pushes: BTreeSet::new(),
+            integrated: Integrated::default(),
+            keep_answers: false,
+            captured: Vec::new(),
+        }
+    }
 }
 
 /// A pile's group step asks for hundreds of thousands of integrations,
@@ -252,7 +297,7 @@ impl<'s> Region<'s> {
         touching: &[Touching],
         seg: &[Segment],
     ) -> PairMap<Vector3<f64>> {
-        if !self.st.switches.skip_separating {
+        if !self.st.step_settings.skip_separating {
             return PairMap::default();
         }
         let velocity_at = |i: usize, p: &Vector3<f64>| self.point_velocity(i, &seg[i].state, p);

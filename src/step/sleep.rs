@@ -113,7 +113,7 @@ impl Region<'_> {
                 self.counters.bodies_fallen += 1;
             }
         }
-        if !self.st.switches.sleep_enabled {
+        if !self.st.step_settings.sleep_enabled {
             return;
         }
         let n = self.bodies.len();
@@ -157,7 +157,7 @@ impl Region<'_> {
                 continue;
             }
             let root = sets.find(i as u32);
-            let ok = self.sleep_timer[i] >= self.st.switches.sleep_after && !held;
+            let ok = self.sleep_timer[i] >= self.st.step_settings.sleep_after && !held;
             let e = ready.entry(root).or_insert(true);
             *e &= ok;
         }

@@ -1,4 +1,4 @@
-//! The step's switches: how a run asks the step to work (test aids and
+//! The step's settings: how a run asks the step to work (test aids and
 //! measurements), held once by the world and sent with every group, the
 //! same on every rank.
 
@@ -10,8 +10,11 @@ use serde::{Deserialize, Serialize};
 /// each event costs more. Results do not depend on it.
 pub const GROUP_MARGIN: f64 = 0.25;
 
+/// How a run asks the step to work (`World::settings`): the resting
+/// systems, the optimisations a test compares with and without, and what
+/// the step keeps for the caller. Sent to the workers in `GroupParams`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct StepSwitches {
+pub struct StepSettings {
     /// Enables resting systems (on by default; analytic tests may switch it off).
     pub sleep_enabled: bool,
     /// Seconds a body stays slow before it rests.
@@ -36,15 +39,15 @@ pub struct StepSwitches {
     pub split_groups: bool,
     /// Keeps a copy of every contact island of this many rows or more
     /// that the step builds, in the order it builds them
-    /// (`World::captured_islands`, `GroupReply`), for the caller to write
+    /// (`Diagnostics::captured_islands`, `GroupReply`), for the caller to write
     /// (`--capture-islands`); `None` (the default): none is kept. Changes
     /// no result.
     pub capture_min_rows: Option<usize>,
 }
 
-impl Default for StepSwitches {
+impl Default for StepSettings {
     fn default() -> Self {
-        StepSwitches {
+        StepSettings {
             sleep_enabled: true,
             sleep_after: 0.5,
             skip_separating: true,
