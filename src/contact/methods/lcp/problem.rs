@@ -80,7 +80,7 @@ impl<'a> LcpProblem<'a> {
         Self { findex, ..self }
     }
 
-    /// The same problem with A's factors (see [`RowFactors`]).
+    /// The same problem started from a guess of x (see [`LcpProblem::start`]).
     pub fn with_start(self, start: &'a [f64]) -> Self {
         LcpProblem {
             start: Some(start),
@@ -88,6 +88,7 @@ impl<'a> LcpProblem<'a> {
         }
     }
 
+    /// The same problem with A's factors (see [`RowFactors`]).
     pub fn with_factors(self, factors: RowFactors<'a>) -> Self {
         Self {
             factors: Some(factors),
