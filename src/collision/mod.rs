@@ -7,4 +7,5 @@ pub mod manifold;
 pub mod narrowphase;
 pub mod patch;
 pub mod polyhedron;
+pub mod sat;
 pub mod vclip;
