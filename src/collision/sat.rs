@@ -1,14 +1,25 @@
 //! The separating-axis test of two convex polyhedra: the axis of least
 //! overlap (or greatest separation) over both polyhedra's face normals and
 //! the edge-edge axes that form faces of their Minkowski difference
-//! (Gregorius, GDC 2013); and, from it, the penetration V-Clip reports
-//! where its features meet (`super::vclip`).
+//! (Gregorius, GDC 2013). V-Clip reports a penetration from it
+//! (`super::vclip`); a leaf of `collision/` beside the polyhedron.
 
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::polyhedron::ConvexPolyhedron;
-use super::vclip::{FACE_CONTACT_COS, Feature, FeaturePair, Proximity, closest_segment_points, xf};
+
+/// The cosine and sine of `FACE_CONTACT_ANGLE` (`math::cos`, `math::sin`,
+/// to the bit: a test checks them). Written out because the `libm` crate's
+/// functions, unlike the C library's, are not folded at compile time: as
+/// calls they ran at every use, twice in each `Support::of`.
+pub const FACE_CONTACT_COS: f64 = 0.9999500004166653;
+pub const FACE_CONTACT_SIN: f64 = 0.009999833334166664;
+
+#[inline]
+pub(super) fn xf(iso: &Isometry3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
+    iso.rotation * v + iso.translation.vector
+}
 
 /// Which kind of axis a separating-axis test settled on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -217,73 +228,6 @@ impl GaussArc {
         let mid = self.from + self.to;
         b.from.dot(&mid) * b2a.abs() + b.to.dot(&mid) * b1a.abs() > 0.0
     }
-}
-
-/// The separating-axis answer when A and B overlap by more than `-below`
-/// (`below` ≤ 0): depth, the deepest vertex (or edge pair) and its
-/// projection onto the other body's face (or edge).
-pub(super) fn sat_penetration(
-    a: &ConvexPolyhedron,
-    pose_a: &Isometry3<f64>,
-    b: &ConvexPolyhedron,
-    pose_b: &Isometry3<f64>,
-    below: f64,
-) -> Option<Proximity> {
-    let sat = separating_axis(a, pose_a, b, pose_b);
-    if sat.largest() >= below {
-        return None;
-    }
-    let b_to_a = pose_a.inv_mul(pose_b);
-    let bv: Vec<Vector3<f64>> = b.vertices().iter().map(|v| xf(&b_to_a, v)).collect();
-    let world = |x: &Vector3<f64>| xf(pose_a, x);
-    let done = |depth, fa, fb, pa: Vector3<f64>, pb: Vector3<f64>| Proximity {
-        distance: depth,
-        penetrating: true,
-        features: FeaturePair { a: fa, b: fb },
-        point_a: world(&pa),
-        point_b: world(&pb),
-        iterations: 0,
-        fell_back: false,
-    };
-    let n = pose_a.rotation.inverse() * sat.normal;
-    let depth = sat.separation;
-    Some(match sat.kind {
-        AxisKind::FaceB(j) => {
-            let va = a.support_index(&-n);
-            let x = a.vertices()[va];
-            done(
-                depth,
-                Feature::Vertex(va as u32),
-                Feature::Face(j),
-                x,
-                x - n * depth,
-            )
-        }
-        AxisKind::FaceA(i) => {
-            let vb = (0..bv.len())
-                .max_by(|&l, &r| bv[l].dot(&n).total_cmp(&bv[r].dot(&n)))
-                .unwrap_or(0);
-            let y = bv[vb];
-            done(
-                depth,
-                Feature::Face(i),
-                Feature::Vertex(vb as u32),
-                y + n * depth,
-                y,
-            )
-        }
-        AxisKind::Edges(i, j) => {
-            let ea = a.edges()[i as usize];
-            let eb = b.edges()[j as usize];
-            let (pa, pb) = closest_segment_points(
-                &a.vertices()[ea.tail as usize],
-                &a.vertices()[ea.head as usize],
-                &bv[eb.tail as usize],
-                &bv[eb.head as usize],
-            );
-            done(depth, Feature::Edge(i), Feature::Edge(j), pa, pb)
-        }
-    })
 }
 
 #[cfg(test)]

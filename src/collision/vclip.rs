@@ -41,15 +41,11 @@ use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::polyhedron::{ConvexPolyhedron, VoronoiPlane};
-use super::sat::sat_penetration;
+use super::sat::AxisKind;
 pub use super::sat::separating_axis;
+use super::sat::xf;
 
-/// The cosine and sine of `FACE_CONTACT_ANGLE` (`math::cos`, `math::sin`,
-/// to the bit: a test checks them). Written out because the `libm` crate's
-/// functions, unlike the C library's, are not folded at compile time: as
-/// calls they ran at every use, twice in each `Support::of`.
-pub const FACE_CONTACT_COS: f64 = 0.9999500004166653;
-pub const FACE_CONTACT_SIN: f64 = 0.009999833334166664;
+pub use super::sat::{FACE_CONTACT_COS, FACE_CONTACT_SIN};
 
 /// A vertex, edge or face of one polyhedron, by index into its tables.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -268,9 +264,71 @@ impl Step {
     }
 }
 
-#[inline]
-pub(super) fn xf(iso: &Isometry3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
-    iso.rotation * v + iso.translation.vector
+/// The separating-axis answer when A and B overlap by more than `-below`
+/// (`below` ≤ 0): depth, the deepest vertex (or edge pair) and its
+/// projection onto the other body's face (or edge).
+pub(super) fn sat_penetration(
+    a: &ConvexPolyhedron,
+    pose_a: &Isometry3<f64>,
+    b: &ConvexPolyhedron,
+    pose_b: &Isometry3<f64>,
+    below: f64,
+) -> Option<Proximity> {
+    let sat = separating_axis(a, pose_a, b, pose_b);
+    if sat.largest() >= below {
+        return None;
+    }
+    let b_to_a = pose_a.inv_mul(pose_b);
+    let bv: Vec<Vector3<f64>> = b.vertices().iter().map(|v| xf(&b_to_a, v)).collect();
+    let world = |x: &Vector3<f64>| xf(pose_a, x);
+    let done = |depth, fa, fb, pa: Vector3<f64>, pb: Vector3<f64>| Proximity {
+        distance: depth,
+        penetrating: true,
+        features: FeaturePair { a: fa, b: fb },
+        point_a: world(&pa),
+        point_b: world(&pb),
+        iterations: 0,
+        fell_back: false,
+    };
+    let n = pose_a.rotation.inverse() * sat.normal;
+    let depth = sat.separation;
+    Some(match sat.kind {
+        AxisKind::FaceB(j) => {
+            let va = a.support_index(&-n);
+            let x = a.vertices()[va];
+            done(
+                depth,
+                Feature::Vertex(va as u32),
+                Feature::Face(j),
+                x,
+                x - n * depth,
+            )
+        }
+        AxisKind::FaceA(i) => {
+            let vb = (0..bv.len())
+                .max_by(|&l, &r| bv[l].dot(&n).total_cmp(&bv[r].dot(&n)))
+                .unwrap_or(0);
+            let y = bv[vb];
+            done(
+                depth,
+                Feature::Face(i),
+                Feature::Vertex(vb as u32),
+                y + n * depth,
+                y,
+            )
+        }
+        AxisKind::Edges(i, j) => {
+            let ea = a.edges()[i as usize];
+            let eb = b.edges()[j as usize];
+            let (pa, pb) = closest_segment_points(
+                &a.vertices()[ea.tail as usize],
+                &a.vertices()[ea.head as usize],
+                &bv[eb.tail as usize],
+                &bv[eb.head as usize],
+            );
+            done(depth, Feature::Edge(i), Feature::Edge(j), pa, pb)
+        }
+    })
 }
 
 fn validated(a: &ConvexPolyhedron, b: &ConvexPolyhedron, pair: FeaturePair) -> Option<FeaturePair> {
