@@ -17,7 +17,9 @@ mod live;
 mod view;
 
 use clap::{Args, Parser, Subcommand};
-use mpi::topology::Communicator;
+use live::driver::LiveDriver;
+use live::inputs::Recording;
+use mpi::topology::{Communicator, SimpleCommunicator};
 use mpi::traits::Root;
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
 use rigidsim::output::checkpoint::Checkpoint;
@@ -25,8 +27,9 @@ use rigidsim::output::summary::RankHost;
 use rigidsim::output::trajectory;
 use rigidsim::render::{FrameRenderer, FrameSink, InlineFrames, NoFrames};
 use rigidsim::run::{self, Driver, RunError, RunOptions, Unattended};
+use rigidsim::scene::Scene;
 use rigidsim::step::{Executor, Inline};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// The step allocates many small vectors; see Cargo.toml.
@@ -380,124 +383,53 @@ fn run_scene(cli: RunArgs, live: Option<LiveServer>) -> ExitCode {
         return ExitCode::from(1);
     };
     let world = universe.world();
-    let rank = world.rank();
-    let size = world.size();
-    let say = |msg: &str| {
-        if rank == 0 {
-            eprintln!("rigidsim: {msg}");
-        }
+    let job = Job {
+        world: &world,
+        rank: world.rank(),
     };
+    let rank = job.rank;
+    let size = world.size();
     // Every rank takes Ctrl-C and SIGTERM (under mpirun each gets one):
     // rank 0 ends the run at the next step boundary, the others keep
     // answering it until it does (`rigidsim::interrupt`).
     if let Err(e) = rigidsim::interrupt::install() {
-        say(&format!(
+        job.say(&format!(
             "warning: Ctrl-C will end the run where it stands: {e}"
         ));
     }
 
     // Every rank loads the scene itself; they all fail alike on bad input,
     // and only rank 0 says so.
-    let opts = RunOptions {
-        out_dir: cli.out.clone(),
-        duration: cli.duration,
-        dt: cli.dt,
-        sample_every: cli.sample_every,
-        speculative_speed: cli.speculative_speed,
-        no_render: cli.no_render,
-        // A live run prints its address, not a bar.
-        no_progress: cli.no_progress || live.is_some(),
-        no_sleep: cli.no_sleep,
-        split_groups: cli.split_groups,
-        checkpoint_every: cli.checkpoint_every,
-    };
-    let mut scene = match rigidsim::scene::load(&cli.scene) {
+    let opts = run_options(&cli, live.is_some());
+    let scene = match load_scene(&cli, &opts, live.is_some()) {
         Ok(s) => s,
         Err(e) => {
-            say(&format!("error: {e}"));
+            job.say(&format!("error: {e}"));
             return ExitCode::from(2);
         }
     };
-    if let Err(e) = run::apply_overrides(&mut scene, &opts) {
-        say(&format!("error: {e}"));
-        return ExitCode::from(2);
-    }
-    // A live run may last hours: its trajectory is sampled at the scene's
-    // `sample_every` where given, otherwise at the frame interval, not at
-    // every step (docs/live.md states what an hour costs on disk).
-    if live.is_some() && scene.settings.sample_every.is_none() {
-        scene.settings.sample_every = Some(scene.settings.frame_interval);
-    }
-    // `--resume`: rank 0 reads the checkpoint and checks it against the scene,
-    // then tells every rank whether to go on, so that a refused checkpoint
-    // ends all ranks alike (exit 2) before any work is handed out. Only rank 0
-    // needs the file.
     let out_dir = opts
         .out_dir
         .clone()
         .unwrap_or_else(|| run::default_out_dir(&scene));
-    let mut resume = None;
-    if let Some(path) = &cli.resume {
-        let mut code: i32 = 0;
-        if rank == 0 {
-            // The trajectory the run will append to must be the one the
-            // checkpoint's run wrote (or missing: a new one is started).
-            let traj = out_dir.join("trajectory.csv");
-            let checked = Checkpoint::read_for(path, &scene, !opts.no_sleep)
-                .map_err(|e| e.to_string())
-                .and_then(|ck| {
-                    trajectory::check_resumable(&traj, ck.run.trajectory)
-                        .map(|()| ck)
-                        .map_err(|e| format!("{}: {e}", traj.display()))
-                });
-            match checked {
-                Ok(ck) => resume = Some(ck),
-                Err(e) => {
-                    say(&format!("error: {e}"));
-                    code = 2;
-                }
-            }
-        }
-        world.process_at_rank(0).broadcast_into(&mut code);
-        if code != 0 {
-            return ExitCode::from(code as u8);
-        }
-    }
-    // `--inputs` and `live`: rank 0 reads the recording or starts the
-    // server, and tells every rank whether to go on (as for `--resume`).
-    let mut recording = None;
-    let mut live_driver = None;
-    if cli.inputs.is_some() || live.is_some() {
-        let mut code: i32 = 0;
-        if rank == 0 {
-            let started = match (&cli.inputs, &live) {
-                (Some(path), _) => live::inputs::read(path, &scene)
-                    .map(|r| recording = Some(r))
-                    .map_err(|e| (e, 2)),
-                (None, Some(l)) => start_live(
-                    &scene,
-                    &out_dir,
-                    l,
-                    opts.duration.is_some(),
-                    resume.as_ref().map(|ck| ck.steps),
-                )
-                .map(|s| live_driver = Some(s))
-                .map_err(|e| (e, 1)),
-                (None, None) => Ok(()),
-            };
-            if let Err((e, c)) = started {
-                say(&format!("error: {e}"));
-                code = c;
-            }
-        }
-        world.process_at_rank(0).broadcast_into(&mut code);
-        if code != 0 {
-            return ExitCode::from(code as u8);
-        }
-    }
+    let resume = match job.read_resume(&cli, &scene, &opts, &out_dir) {
+        Ok(r) => r,
+        Err(code) => return code,
+    };
+    let (recording, live_driver) = match job.start_inputs(
+        &cli,
+        &scene,
+        &opts,
+        &out_dir,
+        live.as_ref(),
+        resume.as_ref(),
+    ) {
+        Ok(started) => started,
+        Err(code) => return code,
+    };
     if let Some(dir) = &cli.capture_islands {
         if let Err(e) = rigidsim::output::capture::start(dir.clone(), cli.capture_min_rows, rank) {
-            say(&format!("error: --capture-islands {}: {e}", dir.display()));
+            job.say(&format!("error: --capture-islands {}: {e}", dir.display()));
             return ExitCode::from(2);
         }
     }
@@ -506,13 +438,13 @@ fn run_scene(cli: RunArgs, live: Option<LiveServer>) -> ExitCode {
     // rank that stops answering, and for `summary.json`.
     let hosts = cluster::rank_hosts(&world);
     if let Some(line) = cluster::hosts_line(&hosts) {
-        say(&line);
+        job.say(&line);
     }
     // And which vector units each rank's CPU has: a lab of mixed PCs is
     // told where its results may depend on the placement.
     let vector_units = cluster::rank_vector_units(&world);
     if let Some(line) = cluster::mixed_vector_units_line(&vector_units) {
-        say(&line);
+        job.say(&line);
     }
 
     if rank != 0 {
@@ -523,85 +455,295 @@ fn run_scene(cli: RunArgs, live: Option<LiveServer>) -> ExitCode {
         }
         return interrupted_status().unwrap_or(ExitCode::SUCCESS);
     }
-
-    let mut inline = Inline::default();
-    let mut mpi_exec;
-    let mut link_rates = Vec::new();
-    let exec: &mut dyn Executor = if roles.workers.is_empty() {
-        &mut inline
-    } else {
-        mpi_exec = MpiExecutor::new(&world, roles.clone(), &scene.objects);
-        mpi_exec.force_distribute = cli.force_distribute;
-        mpi_exec.split_where_it_pays = !cli.whole_groups;
-        mpi_exec.set_hosts(hosts.clone());
-        link_rates = mpi_exec.link_rates();
-        &mut mpi_exec
-    };
-    let mut no_frames = NoFrames;
-    let mut remote;
-    let mut local;
-    let frames: &mut dyn FrameSink = match (scene.settings.render.is_some(), roles.renderer) {
-        (false, _) => &mut no_frames,
-        (true, Some(r)) => {
-            let host = hosts.get(r as usize).cloned().unwrap_or_else(|| "?".into());
-            remote = RemoteFrames::new(&world, r, host);
-            &mut remote
-        }
-        (true, None) => {
-            if let Err(e) = std::fs::create_dir_all(&out_dir) {
-                say(&format!("error: cannot create {}: {e}", out_dir.display()));
-                return ExitCode::from(1);
-            }
-            match FrameRenderer::new(&scene, &out_dir) {
-                Ok(r) => {
-                    local = InlineFrames(r);
-                    &mut local
-                }
-                Err(e) => {
-                    say(&format!("warning: {e}; continuing without frames"));
-                    &mut no_frames
-                }
-            }
-        }
-    };
-    let hosts: Vec<RankHost> = hosts
-        .into_iter()
-        .enumerate()
-        .map(|(r, host)| RankHost {
-            host,
-            link_bytes_per_s: link_rates.get(r).copied().flatten(),
-            vector_units: vector_units.get(r).cloned().unwrap_or_default(),
-        })
-        .collect();
-    let mut unattended = Unattended;
-    let mut replay;
-    let driver: &mut dyn Driver = match (&mut live_driver, recording) {
-        (Some(s), _) => s,
-        (None, Some(r)) => {
-            replay = live::replay::Replay::new(&scene, r, opts.duration.is_some());
-            &mut replay
-        }
-        (None, None) => &mut unattended,
-    };
-    let outcome = run::run_driven(
+    Coordinator {
+        cli,
         scene,
-        &opts,
-        &out_dir,
-        exec,
-        &mut *frames,
+        opts,
+        out_dir,
+        roles,
+        hosts,
+        vector_units,
         resume,
-        &hosts,
-        driver,
-    );
-    if let Some(why) = frames.lost() {
-        // The results are written; a rank that does not answer would hang
-        // MPI's finalize, so the job ends here (mpirun names the ranks).
-        eprintln!(
-            "rigidsim: error: {why}; results in {}; ending the job",
-            out_dir.display()
-        );
-        world.abort(6);
+        recording,
+        live_driver,
     }
+    .run(&job)
+}
+
+/// The command line's choices that change a run (`live`: a live run).
+fn run_options(cli: &RunArgs, live: bool) -> RunOptions {
+    RunOptions {
+        out_dir: cli.out.clone(),
+        duration: cli.duration,
+        dt: cli.dt,
+        sample_every: cli.sample_every,
+        speculative_speed: cli.speculative_speed,
+        no_render: cli.no_render,
+        // A live run prints its address, not a bar.
+        no_progress: cli.no_progress || live,
+        no_sleep: cli.no_sleep,
+        split_groups: cli.split_groups,
+        checkpoint_every: cli.checkpoint_every,
+    }
+}
+
+/// The scene with the command line's overrides (`live`: a live run).
+fn load_scene(cli: &RunArgs, opts: &RunOptions, live: bool) -> Result<Scene, String> {
+    let mut scene = rigidsim::scene::load(&cli.scene).map_err(|e| e.to_string())?;
+    run::apply_overrides(&mut scene, opts)?;
+    // A live run may last hours: its trajectory is sampled at the scene's
+    // `sample_every` where given, otherwise at the frame interval, not at
+    // every step (docs/live.md states what an hour costs on disk).
+    if live && scene.settings.sample_every.is_none() {
+        scene.settings.sample_every = Some(scene.settings.frame_interval);
+    }
+    Ok(scene)
+}
+
+/// This process in the MPI job (`run_scene`).
+struct Job<'w> {
+    world: &'w SimpleCommunicator,
+    rank: i32,
+}
+
+impl Job<'_> {
+    /// `rigidsim: MSG` on stderr, from rank 0 only: every rank meets the
+    /// same errors, and one says so.
+    fn say(&self, msg: &str) {
+        if self.rank == 0 {
+            eprintln!("rigidsim: {msg}");
+        }
+    }
+
+    /// Rank 0's `code` told to every rank: an exit status other than 0
+    /// ends all ranks alike.
+    fn agree(&self, mut code: i32) -> Result<(), ExitCode> {
+        self.world.process_at_rank(0).broadcast_into(&mut code);
+        if code != 0 {
+            return Err(ExitCode::from(code as u8));
+        }
+        Ok(())
+    }
+
+    /// `--resume`: rank 0 reads the checkpoint and checks it against the
+    /// scene, then tells every rank whether to go on, so that a refused
+    /// checkpoint ends all ranks alike (exit 2) before any work is handed
+    /// out. Only rank 0 needs the file.
+    fn read_resume(
+        &self,
+        cli: &RunArgs,
+        scene: &Scene,
+        opts: &RunOptions,
+        out_dir: &Path,
+    ) -> Result<Option<Checkpoint>, ExitCode> {
+        let Some(path) = &cli.resume else {
+            return Ok(None);
+        };
+        let mut resume = None;
+        let mut code: i32 = 0;
+        if self.rank == 0 {
+            // The trajectory the run will append to must be the one the
+            // checkpoint's run wrote (or missing: a new one is started).
+            let traj = out_dir.join("trajectory.csv");
+            let checked = Checkpoint::read_for(path, scene, !opts.no_sleep)
+                .map_err(|e| e.to_string())
+                .and_then(|ck| {
+                    trajectory::check_resumable(&traj, ck.run.trajectory)
+                        .map(|()| ck)
+                        .map_err(|e| format!("{}: {e}", traj.display()))
+                });
+            match checked {
+                Ok(ck) => resume = Some(ck),
+                Err(e) => {
+                    self.say(&format!("error: {e}"));
+                    code = 2;
+                }
+            }
+        }
+        self.agree(code)?;
+        Ok(resume)
+    }
+
+    /// `--inputs` and `live`: rank 0 reads the recording or starts the
+    /// server, and tells every rank whether to go on (as for `--resume`).
+    fn start_inputs(
+        &self,
+        cli: &RunArgs,
+        scene: &Scene,
+        opts: &RunOptions,
+        out_dir: &Path,
+        live: Option<&LiveServer>,
+        resume: Option<&Checkpoint>,
+    ) -> Result<(Option<Recording>, Option<LiveDriver>), ExitCode> {
+        let mut recording = None;
+        let mut live_driver = None;
+        if cli.inputs.is_some() || live.is_some() {
+            let mut code: i32 = 0;
+            if self.rank == 0 {
+                let started = match (&cli.inputs, live) {
+                    (Some(path), _) => live::inputs::read(path, scene)
+                        .map(|r| recording = Some(r))
+                        .map_err(|e| (e, 2)),
+                    (None, Some(l)) => start_live(
+                        scene,
+                        out_dir,
+                        l,
+                        opts.duration.is_some(),
+                        resume.map(|ck| ck.steps),
+                    )
+                    .map(|s| live_driver = Some(s))
+                    .map_err(|e| (e, 1)),
+                    (None, None) => Ok(()),
+                };
+                if let Err((e, c)) = started {
+                    self.say(&format!("error: {e}"));
+                    code = c;
+                }
+            }
+            self.agree(code)?;
+        }
+        Ok((recording, live_driver))
+    }
+}
+
+/// What rank 0 runs the scene with (`Coordinator::run`).
+struct Coordinator {
+    cli: RunArgs,
+    scene: Scene,
+    opts: RunOptions,
+    out_dir: PathBuf,
+    roles: Roles,
+    /// Each rank's host and vector units (by rank).
+    hosts: Vec<String>,
+    vector_units: Vec<String>,
+    resume: Option<Checkpoint>,
+    recording: Option<Recording>,
+    live_driver: Option<LiveDriver>,
+}
+
+/// Where rank 0's frames go (`Coordinator::frames`).
+enum Frames<'w> {
+    None(NoFrames),
+    Remote(RemoteFrames<'w>),
+    /// Boxed: the renderer is large beside the others.
+    Local(Box<InlineFrames>),
+}
+
+impl Frames<'_> {
+    fn sink(&mut self) -> &mut dyn FrameSink {
+        match self {
+            Frames::None(f) => f,
+            Frames::Remote(f) => f,
+            Frames::Local(f) => f.as_mut(),
+        }
+    }
+}
+
+impl Coordinator {
+    /// Rank 0's run: the steps inline or through the workers, the frames
+    /// drawn here or by the renderer rank, and the run's outcome told.
+    fn run(mut self, job: &Job) -> ExitCode {
+        let world = job.world;
+        let mut inline = Inline::default();
+        let mut mpi_exec;
+        let mut link_rates = Vec::new();
+        let exec: &mut dyn Executor = if self.roles.workers.is_empty() {
+            &mut inline
+        } else {
+            mpi_exec = MpiExecutor::new(world, self.roles.clone(), &self.scene.objects);
+            mpi_exec.force_distribute = self.cli.force_distribute;
+            mpi_exec.split_where_it_pays = !self.cli.whole_groups;
+            mpi_exec.set_hosts(self.hosts.clone());
+            link_rates = mpi_exec.link_rates();
+            &mut mpi_exec
+        };
+        let mut frames = match self.frames(job) {
+            Ok(f) => f,
+            Err(code) => return code,
+        };
+        let frames = frames.sink();
+        let hosts: Vec<RankHost> = std::mem::take(&mut self.hosts)
+            .into_iter()
+            .enumerate()
+            .map(|(r, host)| RankHost {
+                host,
+                link_bytes_per_s: link_rates.get(r).copied().flatten(),
+                vector_units: self.vector_units.get(r).cloned().unwrap_or_default(),
+            })
+            .collect();
+        let mut unattended = Unattended;
+        let mut replay;
+        let driver: &mut dyn Driver = match (&mut self.live_driver, self.recording.take()) {
+            (Some(s), _) => s,
+            (None, Some(r)) => {
+                replay = live::replay::Replay::new(&self.scene, r, self.opts.duration.is_some());
+                &mut replay
+            }
+            (None, None) => &mut unattended,
+        };
+        let outcome = run::run_driven(
+            self.scene,
+            &self.opts,
+            &self.out_dir,
+            exec,
+            &mut *frames,
+            self.resume,
+            &hosts,
+            driver,
+        );
+        if let Some(why) = frames.lost() {
+            // The results are written; a rank that does not answer would hang
+            // MPI's finalize, so the job ends here (mpirun names the ranks).
+            eprintln!(
+                "rigidsim: error: {why}; results in {}; ending the job",
+                self.out_dir.display()
+            );
+            world.abort(6);
+        }
+        report(outcome, &self.out_dir, world)
+    }
+
+    /// Where the frames go: nowhere without a render section, else to the
+    /// renderer rank, or drawn here where there is none.
+    fn frames<'w>(&self, job: &Job<'w>) -> Result<Frames<'w>, ExitCode> {
+        Ok(
+            match (self.scene.settings.render.is_some(), self.roles.renderer) {
+                (false, _) => Frames::None(NoFrames),
+                (true, Some(r)) => {
+                    let host = self
+                        .hosts
+                        .get(r as usize)
+                        .cloned()
+                        .unwrap_or_else(|| "?".into());
+                    Frames::Remote(RemoteFrames::new(job.world, r, host))
+                }
+                (true, None) => {
+                    if let Err(e) = std::fs::create_dir_all(&self.out_dir) {
+                        job.say(&format!(
+                            "error: cannot create {}: {e}",
+                            self.out_dir.display()
+                        ));
+                        return Err(ExitCode::from(1));
+                    }
+                    match FrameRenderer::new(&self.scene, &self.out_dir) {
+                        Ok(r) => Frames::Local(Box::new(InlineFrames(r))),
+                        Err(e) => {
+                            job.say(&format!("warning: {e}; continuing without frames"));
+                            Frames::None(NoFrames)
+                        }
+                    }
+                }
+            },
+        )
+    }
+}
+
+/// The run's outcome told on stderr, and the exit status it gives.
+fn report(
+    outcome: Result<rigidsim::output::summary::Summary, RunError>,
+    out_dir: &Path,
+    world: &SimpleCommunicator,
+) -> ExitCode {
     match outcome {
         Ok(summary) => {
             eprintln!(

@@ -12,7 +12,9 @@ use super::touching::{Touching, WarmContact};
 use crate::body::BodyId;
 use crate::collision::manifold::ContactPoint;
 use crate::contact::island;
-use crate::contact::solver::{IslandBody, IslandContact, IslandTask, SPECULATIVE_GAP};
+use crate::contact::solver::{
+    IslandBody, IslandContact, IslandResult, IslandTask, SPECULATIVE_GAP,
+};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
@@ -126,6 +128,28 @@ type ContactWhere = ((BodyId, BodyId), Vector3<f64>);
 /// new one and starts from zero).
 const WARM_MATCH: f64 = 0.05;
 
+/// The touching pairs' points to solve (a pair with near points takes the
+/// ones its island keeps, `solved_points`), and which pairs have any
+/// (`touching_index[link]`: the pair of each link the islands are built of).
+struct PointsToSolve<'t> {
+    touching: &'t [Touching],
+    points: Vec<Vec<ContactPoint>>,
+    touching_index: Vec<usize>,
+}
+
+/// A contact phase's islands (bodies, contact links) and, per island, its
+/// task and what its answer is written back with.
+struct BuiltIslands {
+    islands: Vec<(Vec<BodyId>, Vec<usize>)>,
+    tasks: Vec<IslandTask>,
+    /// Per island, each contact's pair and point in A's body frame.
+    contact_pairs: Vec<Vec<ContactWhere>>,
+    /// Per island, which of its contacts are speculative.
+    near_flags: Vec<Vec<bool>>,
+    /// Per island, its bodies' local indices (tasks carry world ids).
+    locals: Vec<Vec<BodyId>>,
+}
+
 impl Region<'_> {
     /// Islands of the given contacts, solved; applies impulses to the segment
     /// start states of `members` and sets their forces for the rest of the step.
@@ -138,6 +162,41 @@ impl Region<'_> {
         h: f64,
     ) -> Solved {
         let timer = self.stage.start(Stage::BuildIslands);
+        let BuiltIslands {
+            islands,
+            tasks,
+            contact_pairs,
+            near_flags,
+            locals,
+        } = self.build_island_tasks(touching, members, seg, h);
+        self.stage.stop(timer);
+        // Kept for the caller to write (`--capture-islands`), in no stage's time.
+        if let Some(min_rows) = self.st.step_settings.capture_min_rows {
+            let large = tasks.iter().filter(|t| t.rows() >= min_rows);
+            self.captured.extend(large.cloned());
+        }
+
+        let timer = self.stage.start(Stage::SolveIslands);
+        let results = if self.keep_answers {
+            solve_again_or_anew(exec, tasks)
+        } else {
+            exec.solve_islands(tasks)
+        };
+        self.keep_warm_starts(&contact_pairs, &near_flags, &results);
+        self.apply_impulses(&locals, &results, members, seg);
+        self.stage.stop(timer);
+        self.solved(&islands, &results, members, seg)
+    }
+
+    /// The islands of the touching contacts among `members` and their
+    /// tasks (`build_islands`), counted.
+    fn build_island_tasks(
+        &mut self,
+        touching: &[Touching],
+        members: &[usize],
+        seg: &[Segment],
+        h: f64,
+    ) -> BuiltIslands {
         let n = self.bodies.len();
         // Island sizes matter only to near points (none in the exact model).
         let piles = touching
@@ -165,120 +224,29 @@ impl Region<'_> {
             self.bodies[i].is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok()
         });
         let restitution_threshold = self.st.settings.restitution_threshold();
-        let mut tasks = Vec::with_capacity(islands.len());
-        // Per island, each contact's pair and point in A's body frame.
-        let mut contact_pairs: Vec<Vec<ContactWhere>> = Vec::with_capacity(islands.len());
-        // Per island, which of its contacts are speculative.
-        let mut near_flags: Vec<Vec<bool>> = Vec::with_capacity(islands.len());
-        // Per island, its bodies' local indices (tasks carry world ids).
-        let mut locals: Vec<Vec<BodyId>> = Vec::with_capacity(islands.len());
+        let contacts_of = PointsToSolve {
+            touching,
+            points,
+            touching_index,
+        };
+        let mut built = BuiltIslands {
+            tasks: Vec::with_capacity(islands.len()),
+            contact_pairs: Vec::with_capacity(islands.len()),
+            near_flags: Vec::with_capacity(islands.len()),
+            locals: Vec::with_capacity(islands.len()),
+            islands: Vec::new(),
+        };
         for (bodies, contact_ids) in &islands {
-            let mut pairs_here = Vec::new();
-            let mut index: Vec<BodyId> = bodies.clone();
-            let mut contacts = Vec::new();
-            for &ci in contact_ids {
-                let ci = touching_index[ci];
-                let t = &touching[ci];
-                for id in [t.a, t.b] {
-                    if !index.contains(&id) {
-                        index.push(id);
-                    }
-                }
-                let ia = index.iter().position(|&x| x == t.a).unwrap() as u32;
-                let ib = index.iter().position(|&x| x == t.b).unwrap() as u32;
-                let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
-                let rules = &self.st.settings;
-                let frame_a = pose(&seg[t.a.index()].state).inverse();
-                let mut last = if self.st.step_settings.warm_start {
-                    self.warm.get(&(t.a, t.b)).cloned().unwrap_or_default()
-                } else {
-                    Vec::new()
-                };
-                let reach = WARM_MATCH * oa.outer_radius();
-                if !t.points.is_empty() {
-                    self.counters.count_pair_points(t.points.len());
-                }
-                for (k, p) in points[ci].iter().enumerate() {
-                    let near = k >= t.points.len();
-                    let local = frame_a.transform_point(&p.point.into()).coords;
-                    // Each point of the last solve warms one new point at most.
-                    let nearest = last
-                        .iter()
-                        .enumerate()
-                        .map(|(k, w)| (k, (w.local - local).norm()))
-                        .filter(|&(_, d)| d <= reach)
-                        .min_by(|x, y| x.1.total_cmp(&y.1))
-                        .map(|(k, _)| last.swap_remove(k));
-                    let (warm_force, warm_friction, approach) = nearest
-                        .map_or((0.0, Vector3::zeros(), 0.0), |w| {
-                            (w.normal, w.friction, w.approach)
-                        });
-                    pairs_here.push(((t.a, t.b), local));
-                    contacts.push(IslandContact {
-                        a: ia,
-                        b: ib,
-                        point: p.point,
-                        normal: p.normal,
-                        restitution: rules
-                            .restitution_rule
-                            .combine(oa.restitution, ob.restitution),
-                        // A speculative contact is frictionless: it pushes only where
-                        // the gap would close past its target, and its friction rows
-                        // would triple a pile's rows for a push that lasts a step.
-                        friction: if near {
-                            0.0
-                        } else {
-                            rules.friction_rule.combine(oa.friction, ob.friction)
-                        },
-                        separation: p.separation,
-                        warm_force,
-                        warm_friction,
-                        turns: p.turns,
-                        approach,
-                        near,
-                    });
-                }
-            }
-            let bodies: Vec<IslandBody> = index
-                .iter()
-                .map(|id| {
-                    let i = id.index();
-                    let b = &self.bodies[i];
-                    let o = self.object(i);
-                    let s = &seg[i];
-                    let dynamic =
-                        b.is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok();
-                    let body = self.body_at(i, s.state);
-                    let inv_inertia = if dynamic {
-                        body.inv_inertia_world(o)
-                    } else {
-                        nalgebra::Matrix3::zeros()
-                    };
-                    IslandBody {
-                        id: BodyId(self.ids[i]),
-                        inv_mass: if dynamic { 1.0 / o.mass } else { 0.0 },
-                        inv_inertia,
-                        position: s.state.position,
-                        velocity: s.state.velocity,
-                        angular_velocity: body.angular_velocity(o),
-                        external_dv: if dynamic {
-                            s.force * (h / o.mass)
-                        } else {
-                            Vector3::zeros()
-                        },
-                        external_dw: if dynamic {
-                            inv_inertia * s.torque * h
-                        } else {
-                            Vector3::zeros()
-                        },
-                    }
-                })
-                .collect();
+            let (index, contacts, pairs_here) =
+                self.island_contacts(bodies, contact_ids, &contacts_of, seg);
+            let bodies = self.island_bodies(&index, members, seg, h);
             self.counters.contacts += contacts.len() as u64;
-            near_flags.push(contacts.iter().map(|c| c.near).collect());
-            contact_pairs.push(pairs_here);
-            locals.push(index);
-            tasks.push(IslandTask {
+            built
+                .near_flags
+                .push(contacts.iter().map(|c| c.near).collect());
+            built.contact_pairs.push(pairs_here);
+            built.locals.push(index);
+            built.tasks.push(IslandTask {
                 bodies,
                 contacts,
                 dt: h,
@@ -286,22 +254,147 @@ impl Region<'_> {
                 iterative_min_rows: self.st.step_settings.iterative_min_rows as u32,
             });
         }
-        self.counters.islands += tasks.len() as u64;
-        self.stage.stop(timer);
-        // Kept for the caller to write (`--capture-islands`), in no stage's time.
-        if let Some(min_rows) = self.st.step_settings.capture_min_rows {
-            let large = tasks.iter().filter(|t| t.rows() >= min_rows);
-            self.captured.extend(large.cloned());
-        }
+        self.counters.islands += built.tasks.len() as u64;
+        built.islands = islands;
+        built
+    }
 
-        let timer = self.stage.start(Stage::SolveIslands);
-        let results = if self.keep_answers {
-            solve_again_or_anew(exec, tasks)
-        } else {
-            exec.solve_islands(tasks)
-        };
+    /// An island's bodies (its own, then the others its contacts reach, by
+    /// local index) and its contacts, each with its pair and its point in
+    /// A's body frame, warm-started from the pair's last solve.
+    fn island_contacts(
+        &mut self,
+        bodies: &[BodyId],
+        contact_ids: &[usize],
+        contacts_of: &PointsToSolve,
+        seg: &[Segment],
+    ) -> (Vec<BodyId>, Vec<IslandContact>, Vec<ContactWhere>) {
+        let (touching, points) = (contacts_of.touching, &contacts_of.points);
+        let mut pairs_here = Vec::new();
+        let mut index: Vec<BodyId> = bodies.to_vec();
+        let mut contacts = Vec::new();
+        for &ci in contact_ids {
+            let ci = contacts_of.touching_index[ci];
+            let t = &touching[ci];
+            for id in [t.a, t.b] {
+                if !index.contains(&id) {
+                    index.push(id);
+                }
+            }
+            let ia = index.iter().position(|&x| x == t.a).unwrap() as u32;
+            let ib = index.iter().position(|&x| x == t.b).unwrap() as u32;
+            let (oa, ob) = (self.object(t.a.index()), self.object(t.b.index()));
+            let rules = &self.st.settings;
+            let frame_a = pose(&seg[t.a.index()].state).inverse();
+            let mut last = if self.st.step_settings.warm_start {
+                self.warm.get(&(t.a, t.b)).cloned().unwrap_or_default()
+            } else {
+                Vec::new()
+            };
+            let reach = WARM_MATCH * oa.outer_radius();
+            if !t.points.is_empty() {
+                self.counters.count_pair_points(t.points.len());
+            }
+            for (k, p) in points[ci].iter().enumerate() {
+                let near = k >= t.points.len();
+                let local = frame_a.transform_point(&p.point.into()).coords;
+                // Each point of the last solve warms one new point at most.
+                let nearest = last
+                    .iter()
+                    .enumerate()
+                    .map(|(k, w)| (k, (w.local - local).norm()))
+                    .filter(|&(_, d)| d <= reach)
+                    .min_by(|x, y| x.1.total_cmp(&y.1))
+                    .map(|(k, _)| last.swap_remove(k));
+                let (warm_force, warm_friction, approach) = nearest
+                    .map_or((0.0, Vector3::zeros(), 0.0), |w| {
+                        (w.normal, w.friction, w.approach)
+                    });
+                pairs_here.push(((t.a, t.b), local));
+                contacts.push(IslandContact {
+                    a: ia,
+                    b: ib,
+                    point: p.point,
+                    normal: p.normal,
+                    restitution: rules
+                        .restitution_rule
+                        .combine(oa.restitution, ob.restitution),
+                    // A speculative contact is frictionless: it pushes only where
+                    // the gap would close past its target, and its friction rows
+                    // would triple a pile's rows for a push that lasts a step.
+                    friction: if near {
+                        0.0
+                    } else {
+                        rules.friction_rule.combine(oa.friction, ob.friction)
+                    },
+                    separation: p.separation,
+                    warm_force,
+                    warm_friction,
+                    turns: p.turns,
+                    approach,
+                    near,
+                });
+            }
+        }
+        (index, contacts, pairs_here)
+    }
+
+    /// An island's bodies as its task carries them (by world id): a body
+    /// among `members` that moves takes impulses, every other is fixed.
+    fn island_bodies(
+        &self,
+        index: &[BodyId],
+        members: &[usize],
+        seg: &[Segment],
+        h: f64,
+    ) -> Vec<IslandBody> {
+        index
+            .iter()
+            .map(|id| {
+                let i = id.index();
+                let b = &self.bodies[i];
+                let o = self.object(i);
+                let s = &seg[i];
+                let dynamic = b.is_dynamic() && self.moving(i) && members.binary_search(&i).is_ok();
+                let body = self.body_at(i, s.state);
+                let inv_inertia = if dynamic {
+                    body.inv_inertia_world(o)
+                } else {
+                    nalgebra::Matrix3::zeros()
+                };
+                IslandBody {
+                    id: BodyId(self.ids[i]),
+                    inv_mass: if dynamic { 1.0 / o.mass } else { 0.0 },
+                    inv_inertia,
+                    position: s.state.position,
+                    velocity: s.state.velocity,
+                    angular_velocity: body.angular_velocity(o),
+                    external_dv: if dynamic {
+                        s.force * (h / o.mass)
+                    } else {
+                        Vector3::zeros()
+                    },
+                    external_dw: if dynamic {
+                        inv_inertia * s.torque * h
+                    } else {
+                        Vector3::zeros()
+                    },
+                }
+            })
+            .collect()
+    }
+
+    /// Keeps each solved contact's resting force under its pair and point
+    /// (the next solve's warm start), each pair's total force, and the
+    /// pairs a speculative contact pushed on.
+    fn keep_warm_starts(
+        &mut self,
+        contact_pairs: &[Vec<ContactWhere>],
+        near_flags: &[Vec<bool>],
+        results: &[IslandResult],
+    ) {
         let mut pair_forces: BTreeMap<(BodyId, BodyId), f64> = Default::default();
-        for ((pairs, near), r) in contact_pairs.iter().zip(&near_flags).zip(&results) {
+        for ((pairs, near), r) in contact_pairs.iter().zip(near_flags).zip(results) {
             for (pair, _) in pairs {
                 self.warm.remove(pair);
             }
@@ -323,7 +416,18 @@ impl Region<'_> {
             }
         }
         self.pair_forces.extend(pair_forces);
-        for (ids, r) in locals.iter().zip(&results) {
+    }
+
+    /// Applies the islands' impulses to the segment start states of
+    /// `members` and adds their resting forces for the rest of the step.
+    fn apply_impulses(
+        &mut self,
+        locals: &[Vec<BodyId>],
+        results: &[IslandResult],
+        members: &[usize],
+        seg: &mut [Segment],
+    ) {
+        for (ids, r) in locals.iter().zip(results) {
             self.counters.solve.add(&r.stats);
             for (k, id) in ids.iter().enumerate() {
                 let i = id.index();
@@ -338,12 +442,21 @@ impl Region<'_> {
                 s.torque += r.torque[k];
             }
         }
-        self.stage.stop(timer);
-        // An island whose solve holds a resting force, with its fastest
-        // spinner: that force is trusted for `SPIN_TRUST` of turn.
+    }
+
+    /// What the solve of `islands` leaves for the rest of the step: who was
+    /// solved together, and per island whose solve holds a resting force,
+    /// its fastest spinner: that force is trusted for `SPIN_TRUST` of turn.
+    fn solved(
+        &self,
+        islands: &[(Vec<BodyId>, Vec<usize>)],
+        results: &[IslandResult],
+        members: &[usize],
+        seg: &[Segment],
+    ) -> Solved {
         let spinning = islands
             .iter()
-            .zip(&results)
+            .zip(results)
             .filter(|(_, r)| r.contact_force.iter().any(|&f| f > 0.0))
             .filter_map(|((bodies, _), _)| {
                 bodies
@@ -485,10 +598,7 @@ const KEPT_MIN_CONTACTS: usize = 16;
 
 /// The island solves of a split group's parts (`Region::keep_answers`,
 /// `super::kept`): `solve_island` is a function of its task alone.
-fn solve_again_or_anew(
-    exec: &mut dyn Executor,
-    tasks: Vec<IslandTask>,
-) -> Vec<crate::contact::solver::IslandResult> {
+fn solve_again_or_anew(exec: &mut dyn Executor, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
     use crate::contact::solver::IslandResult;
     thread_local! {
         static KEPT: std::cell::RefCell<Kept<IslandResult>> = Default::default();

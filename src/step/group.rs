@@ -746,21 +746,13 @@ pub(crate) fn step_groups<'s>(
     captured: &mut Vec<IslandTask>,
 ) -> Result<GroupsDone, NumericalFailure> {
     let n = world.bodies.len();
-    let index = StartIndex {
-        features: PairIndex::new(n, world.features.keys()),
-        since: PairIndex::new(n, start.since.keys()),
-        separating: PairIndex::new(n, start.separating.keys()),
-        warm: PairIndex::new(
-            n,
-            world
-                .warm
-                .keys()
-                .map(|(a, b)| (a.0, b.0))
-                .collect::<Vec<_>>()
-                .iter(),
-        ),
+    let from = GroupsFrom {
+        st,
+        world,
+        start,
+        index: StartIndex::of(world, start),
+        params: GroupParams::of(st),
     };
-    let params = GroupParams::of(st);
     let mut done = GroupsDone {
         runs: Vec::new(),
         reruns: 0,
@@ -768,72 +760,178 @@ pub(crate) fn step_groups<'s>(
         counters: Counters::default(),
         stage: StageSeconds::default(),
     };
-    // The large groups' first stage, through the executor, then their parts.
-    let whole = plan_groups(world, start);
-    // `--split-groups` splits them all; otherwise the executor chooses
-    // (and measures its choice).
-    let chosen = if st.step_settings.split_groups {
-        vec![true; whole.len()]
-    } else {
-        exec.split_groups(
-            &whole
-                .iter()
-                .map(|p| (predicted_s(start, p), p.members.len()))
-                .collect::<Vec<_>>(),
-        )
-    };
-    let large: Vec<usize> = (0..whole.len())
-        .filter(|&p| whole[p].members.len() >= SPLIT_MIN_MEMBERS && chosen[p])
-        .collect();
-    let inputs = large
-        .iter()
-        .map(|&p| group_input(world, start, &index, &whole[p]))
-        .collect();
-    let mut first: BTreeMap<usize, PreparedPairs> = large
-        .into_iter()
-        .zip(exec.prepare_groups(st, &params, inputs))
-        .collect();
-    let mut families: Vec<Family> = Vec::new();
-    let mut family_of: Vec<Option<usize>> = vec![None; n];
-    let mut plans = Vec::new();
-    for (p, plan) in whole.into_iter().enumerate() {
-        let Some(prepared) = first.remove(&p) else {
-            plans.push(plan);
-            continue;
-        };
-        done.counters.add(&prepared.counters);
-        done.stage.add(&prepared.stage, &[Stage::Narrowphase]);
-        let family = Family {
-            members: plan.members.clone(),
-            first: plan
-                .pairs
-                .iter()
-                .copied()
-                .zip(prepared.results.into_iter().zip(prepared.toi))
-                .collect(),
-            busy_s: prepared.busy_s,
-        };
-        for &i in &plan.members {
-            family_of[i as usize] = Some(families.len());
-        }
-        plans.extend(split_group(world, start, &plan, &family));
-        families.push(family);
-    }
-    plans.sort_by_key(GroupPlan::id);
-    // The family all of a plan's members belong to, if one does.
-    let one_family = |plan: &GroupPlan| {
-        let f = family_of[plan.members[0] as usize]?;
-        plan.members
-            .iter()
-            .all(|&i| family_of[i as usize] == Some(f))
-            .then_some(f)
-    };
+    let (mut plans, families) = from.plans_with_parts(exec, &mut done);
     let mut runs: Vec<Option<GroupOutput>> = (0..plans.len()).map(|_| None).collect();
     // Results of the pairs between parts checked so far (`check_parts`).
     let mut between: BTreeMap<PairKey, PairResult> = BTreeMap::new();
     loop {
-        // Every group still to step, through the executor (inline, or
-        // scattered over the workers); answers come back in group order.
+        let fresh = from.run_pending(&plans, &families, &mut runs, exec, captured)?;
+        let owner = owners(n, &plans);
+        let meets =
+            from.check_families(&families, (&owner, &fresh), &runs, &mut between, &mut done);
+        let leaks = find_leaks(n, start, &plans, &runs, &owner);
+        if leaks.is_empty() && meets.is_empty() {
+            done.between = between.into_iter().collect();
+            break;
+        }
+        (plans, runs) = from.merge_met(&families, (plans, runs), meets, leaks, &mut done.reruns);
+    }
+    done.runs = runs
+        .into_iter()
+        .map(|r| r.expect("every group ran"))
+        .collect();
+    exec.groups_stepped();
+    Ok(done)
+}
+
+impl StartIndex {
+    /// The indices of the world's entries at the start of the impact stage.
+    fn of(world: &Region, start: &StepStart) -> Self {
+        let n = world.bodies.len();
+        StartIndex {
+            features: PairIndex::new(n, world.features.keys()),
+            since: PairIndex::new(n, start.since.keys()),
+            separating: PairIndex::new(n, start.separating.keys()),
+            warm: PairIndex::new(
+                n,
+                world
+                    .warm
+                    .keys()
+                    .map(|(a, b)| (a.0, b.0))
+                    .collect::<Vec<_>>()
+                    .iter(),
+            ),
+        }
+    }
+}
+
+/// What every group of the step is planned, cut and stepped from.
+struct GroupsFrom<'a, 's> {
+    st: &'s StepStatic<'s>,
+    world: &'a Region<'s>,
+    start: &'a StepStart,
+    index: StartIndex,
+    params: GroupParams,
+}
+
+/// The large groups split into parts (`split_group`), and the family each
+/// body belongs to, if any.
+struct Families {
+    list: Vec<Family>,
+    of: Vec<Option<usize>>,
+}
+
+impl Families {
+    /// The family all of a plan's members belong to, if one does.
+    fn one_family(&self, plan: &GroupPlan) -> Option<usize> {
+        let f = self.of[plan.members[0] as usize]?;
+        plan.members
+            .iter()
+            .all(|&i| self.of[i as usize] == Some(f))
+            .then_some(f)
+    }
+}
+
+/// The group (index into `plans`) each body is a member of, if any.
+fn owners(n: usize, plans: &[GroupPlan]) -> Vec<Option<usize>> {
+    let mut owner: Vec<Option<usize>> = vec![None; n];
+    for (p, plan) in plans.iter().enumerate() {
+        for &i in &plan.members {
+            owner[i as usize] = Some(p);
+        }
+    }
+    owner
+}
+
+/// The realised paths the runs returned, by body (`GroupOutput::paths`).
+fn realised_paths(n: usize, runs: &[Option<GroupOutput>]) -> Vec<Option<&[Segment]>> {
+    let mut paths: Vec<Option<&[Segment]>> = vec![None; n];
+    for run in runs.iter().flatten() {
+        for (i, path) in &run.paths {
+            paths[*i as usize] = Some(path);
+        }
+    }
+    paths
+}
+
+impl GroupsFrom<'_, '_> {
+    /// The step's group plans, sorted by id, with the large groups split
+    /// into parts after their first stage (through the executor).
+    fn plans_with_parts(
+        &self,
+        exec: &mut dyn Executor,
+        done: &mut GroupsDone,
+    ) -> (Vec<GroupPlan>, Families) {
+        let (st, world, start) = (self.st, self.world, self.start);
+        let n = world.bodies.len();
+        // The large groups' first stage, through the executor, then their parts.
+        let whole = plan_groups(world, start);
+        // `--split-groups` splits them all; otherwise the executor chooses
+        // (and measures its choice).
+        let chosen = if st.step_settings.split_groups {
+            vec![true; whole.len()]
+        } else {
+            exec.split_groups(
+                &whole
+                    .iter()
+                    .map(|p| (predicted_s(start, p), p.members.len()))
+                    .collect::<Vec<_>>(),
+            )
+        };
+        let large: Vec<usize> = (0..whole.len())
+            .filter(|&p| whole[p].members.len() >= SPLIT_MIN_MEMBERS && chosen[p])
+            .collect();
+        let inputs = large
+            .iter()
+            .map(|&p| group_input(world, start, &self.index, &whole[p]))
+            .collect();
+        let mut first: BTreeMap<usize, PreparedPairs> = large
+            .into_iter()
+            .zip(exec.prepare_groups(st, &self.params, inputs))
+            .collect();
+        let mut families = Families {
+            list: Vec::new(),
+            of: vec![None; n],
+        };
+        let mut plans = Vec::new();
+        for (p, plan) in whole.into_iter().enumerate() {
+            let Some(prepared) = first.remove(&p) else {
+                plans.push(plan);
+                continue;
+            };
+            done.counters.add(&prepared.counters);
+            done.stage.add(&prepared.stage, &[Stage::Narrowphase]);
+            let family = Family {
+                members: plan.members.clone(),
+                first: plan
+                    .pairs
+                    .iter()
+                    .copied()
+                    .zip(prepared.results.into_iter().zip(prepared.toi))
+                    .collect(),
+                busy_s: prepared.busy_s,
+            };
+            for &i in &plan.members {
+                families.of[i as usize] = Some(families.list.len());
+            }
+            plans.extend(split_group(world, start, &plan, &family));
+            families.list.push(family);
+        }
+        plans.sort_by_key(GroupPlan::id);
+        (plans, families)
+    }
+
+    /// Steps every group still to step (`runs[p]` is `None`), through the
+    /// executor (inline, or scattered over the workers); answers come back
+    /// in group order. Returns which groups ran now.
+    fn run_pending(
+        &self,
+        plans: &[GroupPlan],
+        families: &Families,
+        runs: &mut [Option<GroupOutput>],
+        exec: &mut dyn Executor,
+        captured: &mut Vec<IslandTask>,
+    ) -> Result<Vec<bool>, NumericalFailure> {
         let todo: Vec<usize> = (0..plans.len()).filter(|&p| runs[p].is_none()).collect();
         let mut fresh = vec![false; plans.len()];
         for &p in &todo {
@@ -843,18 +941,18 @@ pub(crate) fn step_groups<'s>(
             .iter()
             .map(|&p| {
                 let plan = &plans[p];
-                let mut input = group_input(world, start, &index, plan);
-                if let Some(f) = one_family(plan) {
-                    input.prepared = Some(families[f].prepared(&plan.pairs));
+                let mut input = group_input(self.world, self.start, &self.index, plan);
+                if let Some(f) = families.one_family(plan) {
+                    input.prepared = Some(families.list[f].prepared(&plan.pairs));
                 }
                 input.keep_paths = plan
                     .members
                     .iter()
-                    .any(|&i| family_of[i as usize].is_some());
+                    .any(|&i| families.of[i as usize].is_some());
                 input
             })
             .collect();
-        let mut replies = exec.step_groups(st, &params, inputs);
+        let mut replies = exec.step_groups(self.st, &self.params, inputs);
         for reply in &mut replies {
             captured.append(&mut reply.1);
         }
@@ -862,112 +960,75 @@ pub(crate) fn step_groups<'s>(
             let output = reply.0.expect("every group answered")?;
             runs[p] = Some(output);
         }
-        let mut owner: Vec<Option<usize>> = vec![None; n];
-        for (p, plan) in plans.iter().enumerate() {
-            for &i in &plan.members {
-                owner[i as usize] = Some(p);
-            }
-        }
-        let mut paths: Vec<Option<&[Segment]>> = vec![None; n];
-        for run in runs.iter().flatten() {
-            for (i, path) in &run.paths {
-                paths[*i as usize] = Some(path);
-            }
-        }
-        // What was checked between parts that have not run again stands.
+        Ok(fresh)
+    }
+
+    /// Checks the pairs between the parts of every split group against
+    /// the paths the parts took (`check_parts`); returns the parts that
+    /// met. What was checked between parts that have not run again stands
+    /// in `between`.
+    fn check_families(
+        &self,
+        families: &Families,
+        (owner, fresh): (&[Option<usize>], &[bool]),
+        runs: &[Option<GroupOutput>],
+        between: &mut BTreeMap<PairKey, PairResult>,
+        done: &mut GroupsDone,
+    ) -> Vec<(usize, usize)> {
+        let paths = realised_paths(self.world.bodies.len(), runs);
         between.retain(|&(a, b), _| match (owner[a as usize], owner[b as usize]) {
             (Some(p), Some(q)) => p != q && !fresh[p] && !fresh[q],
             _ => false,
         });
         let mut meets = Vec::new();
-        for family in &families {
+        for family in &families.list {
             check_parts(
-                st,
-                world,
-                start,
+                self.st,
+                self.world,
+                self.start,
                 family,
-                (&owner, &fresh),
+                (owner, fresh),
                 &paths,
                 &mut meets,
-                &mut between,
-                &mut done,
+                between,
+                done,
             );
         }
-        let leaks = find_leaks(n, start, &plans, &runs, &owner);
-        if leaks.is_empty() && meets.is_empty() {
-            done.between = between.into_iter().collect();
-            break;
-        }
-        // Merge: groups that met become one (the lowest index keeps the
-        // plan); outside bodies join the group that met them.
-        let mut sets = DisjointSets::new(plans.len());
-        let mut joins: BTreeMap<usize, BTreeSet<u32>> = BTreeMap::new();
-        for (p, q) in meets {
-            sets.union(p as u32, q as u32);
-        }
-        for (p, leak) in leaks {
-            match leak {
-                Leak::Group(q) => sets.union(p as u32, q as u32),
-                Leak::Body(b) => {
-                    joins.entry(p).or_default().insert(b);
-                }
-            }
-        }
-        // A split group whose parts merge into one holding more than half
-        // its bodies steps whole: its parts would go on meeting, and each
-        // round's runs of the growing part would be lost.
-        let mut in_family: BTreeMap<(usize, u32), usize> = BTreeMap::new();
-        for (p, plan) in plans.iter().enumerate() {
-            for &i in &plan.members {
-                if let Some(f) = family_of[i as usize] {
-                    *in_family.entry((f, sets.find(p as u32))).or_default() += 1;
-                }
-            }
-        }
-        for (f, family) in families.iter().enumerate() {
-            let most = in_family
-                .range((f, 0)..=(f, u32::MAX))
-                .map(|(_, &k)| k)
-                .max()
-                .unwrap_or(0);
-            if 2 * most > family.members.len() {
-                let parts: Vec<usize> = (0..plans.len())
-                    .filter(|&p| family_of[plans[p].members[0] as usize] == Some(f))
-                    .collect();
-                for w in parts.windows(2) {
-                    sets.union(w[0] as u32, w[1] as u32);
-                }
-            }
-        }
-        let mut merged: BTreeMap<u32, GroupPlan> = BTreeMap::new();
-        let mut changed: BTreeSet<u32> = BTreeSet::new();
-        for (p, plan) in plans.iter().enumerate() {
-            let root = sets.find(p as u32);
-            if root != p as u32 || joins.contains_key(&p) {
-                changed.insert(root);
-            }
-            let m = merged.entry(root).or_default();
-            m.members.extend(&plan.members);
-            m.neighbours.extend(&plan.neighbours);
-            m.pairs.extend(&plan.pairs);
-            for &b in joins.get(&p).into_iter().flatten() {
-                let body = &world.bodies[b as usize];
-                if !body.is_dynamic() {
-                    m.neighbours.push(b);
-                } else if body.activity == Activity::Sleeping {
-                    let s = world.sleep_group[b as usize];
-                    m.members.extend((0..n as u32).filter(|&i| {
-                        world.bodies[i as usize].activity == Activity::Sleeping
-                            && world.sleep_group[i as usize] == s
-                    }));
-                } else {
-                    m.members.push(b);
-                }
-            }
-        }
-        let mut old_runs: Vec<Option<GroupOutput>> = runs;
-        plans = Vec::new();
-        runs = Vec::new();
+        meets
+    }
+
+    /// Merges the groups that met: they become one (the lowest index
+    /// keeps the plan), and outside bodies join the group that met them.
+    /// Returns the new plans in id order with the runs that still stand
+    /// (`None`: to step again, counted in `reruns`).
+    fn merge_met(
+        &self,
+        families: &Families,
+        (plans, runs): (Vec<GroupPlan>, Vec<Option<GroupOutput>>),
+        meets: Vec<(usize, usize)>,
+        leaks: Vec<(usize, Leak)>,
+        reruns: &mut u64,
+    ) -> (Vec<GroupPlan>, Vec<Option<GroupOutput>>) {
+        let (mut sets, joins) = meeting_sets(plans.len(), meets, leaks);
+        step_families_whole(&mut sets, &plans, families);
+        let (merged, changed) = merged_plans(self.world, &plans, &mut sets, &joins);
+        let (plans, runs) = self.merged_runs(families, merged, &changed, runs, reruns);
+        in_id_order(plans, runs)
+    }
+
+    /// The merged plans, their members, neighbours and pairs sorted; a
+    /// group that changed takes its split families' pairs among its
+    /// members and steps again, another keeps its run.
+    fn merged_runs(
+        &self,
+        families: &Families,
+        merged: BTreeMap<u32, GroupPlan>,
+        changed: &BTreeSet<u32>,
+        mut old_runs: Vec<Option<GroupOutput>>,
+        reruns: &mut u64,
+    ) -> (Vec<GroupPlan>, Vec<Option<GroupOutput>>) {
+        let mut plans = Vec::new();
+        let mut runs = Vec::new();
         for (root, mut m) in merged {
             m.members.sort_unstable();
             m.members.dedup();
@@ -977,11 +1038,15 @@ pub(crate) fn step_groups<'s>(
                 let involved: BTreeSet<usize> = m
                     .members
                     .iter()
-                    .filter_map(|&i| family_of[i as usize])
+                    .filter_map(|&i| families.of[i as usize])
                     .collect();
                 for f in involved {
-                    m.pairs
-                        .extend(family_pairs(world, start, &families[f], &m.members));
+                    m.pairs.extend(family_pairs(
+                        self.world,
+                        self.start,
+                        &families.list[f],
+                        &m.members,
+                    ));
                 }
             }
             m.neighbours.sort_unstable();
@@ -990,31 +1055,125 @@ pub(crate) fn step_groups<'s>(
             m.pairs.dedup();
             plans.push(m);
             if changed.contains(&root) {
-                done.reruns += 1;
+                *reruns += 1;
                 runs.push(None);
             } else {
                 runs.push(old_runs[root as usize].take());
             }
         }
-        // Keep the plans in id order (a merged group takes its lowest member).
-        let mut order: Vec<usize> = (0..plans.len()).collect();
-        order.sort_by_key(|&p| plans[p].id());
-        let mut taken: Vec<Option<(GroupPlan, Option<GroupOutput>)>> =
-            plans.into_iter().zip(runs).map(Some).collect();
-        plans = Vec::new();
-        runs = Vec::new();
-        for p in order {
-            let (plan, run) = taken[p].take().expect("each plan once");
-            plans.push(plan);
-            runs.push(run);
+        (plans, runs)
+    }
+}
+
+/// The sets of groups that met (by index), and the outside bodies that
+/// join each group.
+fn meeting_sets(
+    groups: usize,
+    meets: Vec<(usize, usize)>,
+    leaks: Vec<(usize, Leak)>,
+) -> (DisjointSets, BTreeMap<usize, BTreeSet<u32>>) {
+    let mut sets = DisjointSets::new(groups);
+    let mut joins: BTreeMap<usize, BTreeSet<u32>> = BTreeMap::new();
+    for (p, q) in meets {
+        sets.union(p as u32, q as u32);
+    }
+    for (p, leak) in leaks {
+        match leak {
+            Leak::Group(q) => sets.union(p as u32, q as u32),
+            Leak::Body(b) => {
+                joins.entry(p).or_default().insert(b);
+            }
         }
     }
-    done.runs = runs
-        .into_iter()
-        .map(|r| r.expect("every group ran"))
-        .collect();
-    exec.groups_stepped();
-    Ok(done)
+    (sets, joins)
+}
+
+/// A split group whose parts merge into one holding more than half its
+/// bodies steps whole: its parts would go on meeting, and each round's
+/// runs of the growing part would be lost.
+fn step_families_whole(sets: &mut DisjointSets, plans: &[GroupPlan], families: &Families) {
+    let mut in_family: BTreeMap<(usize, u32), usize> = BTreeMap::new();
+    for (p, plan) in plans.iter().enumerate() {
+        for &i in &plan.members {
+            if let Some(f) = families.of[i as usize] {
+                *in_family.entry((f, sets.find(p as u32))).or_default() += 1;
+            }
+        }
+    }
+    for (f, family) in families.list.iter().enumerate() {
+        let most = in_family
+            .range((f, 0)..=(f, u32::MAX))
+            .map(|(_, &k)| k)
+            .max()
+            .unwrap_or(0);
+        if 2 * most > family.members.len() {
+            let parts: Vec<usize> = (0..plans.len())
+                .filter(|&p| families.of[plans[p].members[0] as usize] == Some(f))
+                .collect();
+            for w in parts.windows(2) {
+                sets.union(w[0] as u32, w[1] as u32);
+            }
+        }
+    }
+}
+
+/// The plans merged under each set's root, with the outside bodies that
+/// joined them (a sleeping one with its whole resting system), and the
+/// roots whose group changed.
+fn merged_plans(
+    world: &Region,
+    plans: &[GroupPlan],
+    sets: &mut DisjointSets,
+    joins: &BTreeMap<usize, BTreeSet<u32>>,
+) -> (BTreeMap<u32, GroupPlan>, BTreeSet<u32>) {
+    let n = world.bodies.len();
+    let mut merged: BTreeMap<u32, GroupPlan> = BTreeMap::new();
+    let mut changed: BTreeSet<u32> = BTreeSet::new();
+    for (p, plan) in plans.iter().enumerate() {
+        let root = sets.find(p as u32);
+        if root != p as u32 || joins.contains_key(&p) {
+            changed.insert(root);
+        }
+        let m = merged.entry(root).or_default();
+        m.members.extend(&plan.members);
+        m.neighbours.extend(&plan.neighbours);
+        m.pairs.extend(&plan.pairs);
+        for &b in joins.get(&p).into_iter().flatten() {
+            let body = &world.bodies[b as usize];
+            if !body.is_dynamic() {
+                m.neighbours.push(b);
+            } else if body.activity == Activity::Sleeping {
+                let s = world.sleep_group[b as usize];
+                m.members.extend((0..n as u32).filter(|&i| {
+                    world.bodies[i as usize].activity == Activity::Sleeping
+                        && world.sleep_group[i as usize] == s
+                }));
+            } else {
+                m.members.push(b);
+            }
+        }
+    }
+    (merged, changed)
+}
+
+/// The plans and their runs in id order (a merged group takes its lowest
+/// member).
+fn in_id_order(
+    plans: Vec<GroupPlan>,
+    runs: Vec<Option<GroupOutput>>,
+) -> (Vec<GroupPlan>, Vec<Option<GroupOutput>>) {
+    let mut order: Vec<usize> = (0..plans.len()).collect();
+    order.sort_by_key(|&p| plans[p].id());
+    let mut taken: Vec<Option<(GroupPlan, Option<GroupOutput>)>> =
+        plans.into_iter().zip(runs).map(Some).collect();
+    let mut plans = Vec::new();
+    let mut runs = Vec::new();
+    for p in order {
+        let (plan, run) = taken[p].take().expect("each plan once");
+        plans.push(plan);
+        runs.push(run);
+    }
+    (plans, runs)
 }
 
 /// World ids of a group's touching contacts, impacts and warm starts.

@@ -7,7 +7,7 @@ use super::contact::{SolvedTogether, SpinResolves};
 use super::executor::{Executor, GroupOutput, PairKey, PreparedPairs, Segment, Since};
 use super::region::{PairMap, Region};
 use super::stats::{NumericalFailure, check_states};
-use super::timers::Stage;
+use super::timers::{Stage, StageTimer};
 use super::toi::{Search, SolvedSince};
 use crate::body::{Activity, BodyState};
 use crate::collision::broadphase::SphereProxy;
@@ -299,24 +299,20 @@ pub(crate) fn step_group(
     s: GroupState,
     exec: &mut dyn Executor,
 ) -> Result<GroupOutput, NumericalFailure> {
-    let h = g.st.settings.dt;
-    let t0 = g.st.t0;
-    let n = g.bodies.len();
-    let GroupState {
-        mut seg,
-        mut end,
-        pairs,
-        mut since,
-        mut separating,
-        together: mut solved_together,
-        mut spin_resolves,
-        prepared,
-        keep_paths,
-    } = s;
-    // narrowphase: the group's pairs at the end of the step (unless they
-    // were answered beforehand, with their times of impact).
-    let prepared_tasks = prepared.as_ref().map_or(0, PreparedPairs::tasks);
-    let (results, prepared_toi) = match prepared {
+    let mut events = EventLoop::begin(g, s, exec);
+    while events.take_next(g, exec)? {}
+    Ok(events.finish(g))
+}
+
+/// The group's pairs at the end of the step (the narrowphase), with their
+/// times of impact where they were answered beforehand (`prepared`).
+fn end_of_step_pairs(
+    g: &mut Region,
+    exec: &mut dyn Executor,
+    prepared: Option<PreparedPairs>,
+    (pairs, end, separating): (&[PairKey], &[BodyState], &PairMap<Vector3<f64>>),
+) -> (Vec<PairResult>, Option<Vec<Option<f64>>>) {
+    match prepared {
         Some(p) => {
             g.counters.add(&p.counters);
             g.stage
@@ -324,72 +320,229 @@ pub(crate) fn step_group(
             (p.results, Some(p.toi))
         }
         None => (
-            g.narrowphase_skipping_separating(exec, &pairs, &end, &separating),
+            g.narrowphase_skipping_separating(exec, pairs, end, separating),
             None,
         ),
-    };
-    let keys = prepared_toi.as_ref().map(|_| pairs.clone());
-    let timer = g.stage.start(Stage::TimeOfImpact);
-    let mut book = PairBook::new(g, &seg, &end, pairs, results);
-    if let (Some(keys), Some(toi)) = (keys, prepared_toi) {
-        book.known(&keys, toi);
     }
-    // Each body's predicted spheres, grown as when the groups were formed:
-    // a realised piece inside them can meet only what this group holds.
-    let predicted: Vec<Option<Vec<SphereProxy>>> = book
-        .spheres
-        .iter()
-        .map(|s| {
-            s.as_ref().map(|(s, _, _)| {
-                s.iter()
-                    .map(|p| SphereProxy {
-                        radius: p.radius * (1.0 + g.st.step_settings.group_margin),
-                        ..*p
-                    })
-                    .collect()
+}
+
+/// The pieces of the bodies' realised paths that leave their predicted
+/// spheres (`GroupOutput::pieces`), which `group` tests against what the
+/// group does not hold.
+struct PathPieces {
+    /// Each body's predicted spheres, grown as when the groups were
+    /// formed: a realised piece inside them can meet only what this group
+    /// holds (`None`: fallen).
+    predicted: Vec<Option<Vec<SphereProxy>>>,
+    pieces: Vec<SphereProxy>,
+}
+
+impl PathPieces {
+    fn new(g: &Region, book: &PairBook) -> Self {
+        let predicted = book
+            .spheres
+            .iter()
+            .map(|s| {
+                s.as_ref().map(|(s, _, _)| {
+                    s.iter()
+                        .map(|p| SphereProxy {
+                            radius: p.radius * (1.0 + g.st.step_settings.group_margin),
+                            ..*p
+                        })
+                        .collect()
+                })
             })
-        })
-        .collect();
-    let record =
-        |g: &Region, pieces: &mut Vec<SphereProxy>, i: usize, from: &BodyState, to: &BodyState| {
-            let mut piece = Vec::new();
-            g.push_swept(&mut piece, g.ids[i], i, from, to);
-            let inside = predicted[i].as_ref().is_some_and(|grown| {
-                piece.len() == grown.len()
-                    && piece
-                        .iter()
-                        .zip(grown)
-                        .all(|(p, q)| (p.center - q.center).norm() + p.radius <= q.radius)
-            });
-            if !inside {
-                pieces.extend(piece);
-            }
+            .collect();
+        PathPieces {
+            predicted,
+            pieces: Vec::new(),
+        }
+    }
+
+    /// Keeps body `i`'s path from `from` to `to` unless it lies inside its
+    /// predicted spheres.
+    fn record(&mut self, g: &Region, i: usize, from: &BodyState, to: &BodyState) {
+        let mut piece = Vec::new();
+        g.push_swept(&mut piece, g.ids[i], i, from, to);
+        let inside = self.predicted[i].as_ref().is_some_and(|grown| {
+            piece.len() == grown.len()
+                && piece
+                    .iter()
+                    .zip(grown)
+                    .all(|(p, q)| (p.center - q.center).norm() + p.radius <= q.radius)
+        });
+        if !inside {
+            self.pieces.extend(piece);
+        }
+    }
+}
+
+/// What the event loop chose to do next (`EventLoop::choose`).
+enum Choice {
+    /// No impact or spin resolve is left in the step.
+    Done,
+    /// The earliest impact was accepted as it is (its bodies are out of
+    /// events); look again.
+    Accepted,
+    /// Take the event of `pair` at `tau`: an impact, or a spin resolve (a
+    /// body paired with itself).
+    Take {
+        pair: PairKey,
+        tau: f64,
+        spin_resolve: bool,
+    },
+}
+
+/// An event's impact group at its instant τ (`Region::impact_group`): the
+/// bodies rolled back with their states there, and their pairs' results.
+struct Impact {
+    pair: PairKey,
+    tau: f64,
+    states: Vec<(usize, BodyState)>,
+    pairs: Vec<PairKey>,
+    at_tau: Vec<PairResult>,
+}
+
+/// The dynamic bodies of `pair`.
+fn dynamic_bodies(g: &Region, (a, b): PairKey) -> Vec<usize> {
+    [a as usize, b as usize]
+        .into_iter()
+        .filter(|&i| g.bodies[i].is_dynamic())
+        .collect::<Vec<_>>()
+}
+
+/// What the group's impact loop carries from one event to the next.
+struct EventLoop {
+    h: f64,
+    t0: f64,
+    seg: Vec<Segment>,
+    end: Vec<BodyState>,
+    since: SolvedSince,
+    separating: PairMap<Vector3<f64>>,
+    solved_together: SolvedTogether,
+    spin_resolves: SpinResolves,
+    book: PairBook,
+    pieces: PathPieces,
+    /// Which bodies have left their predicted path (rolled back or woken).
+    left: Vec<bool>,
+    keep_paths: bool,
+    /// The segments each body took, where asked for (`GroupOutput::paths`).
+    paths: Vec<Vec<Segment>>,
+    events: usize,
+    accepted: BTreeSet<PairKey>,
+    /// Every rule of the loop is a body's own, so that a group split into
+    /// parts (`group::split_group`) decides each as the whole group would:
+    /// the events each body took part in (`EVENTS_PER_BODY`), and the last
+    /// event that moved it, by world ids (the no-progress rule).
+    events_of: Vec<usize>,
+    last_of: Vec<Option<(PairKey, f64)>>,
+    /// The time of impact stage, from the first stage's end to the loop's.
+    timer: StageTimer,
+    prepared_tasks: u64,
+}
+
+impl EventLoop {
+    /// The group step's first stage, the narrowphase of its pairs at the
+    /// end of the step (unless they were answered beforehand, with their
+    /// times of impact), and the loop's state before its first event.
+    fn begin(g: &mut Region, s: GroupState, exec: &mut dyn Executor) -> Self {
+        let h = g.st.settings.dt;
+        let t0 = g.st.t0;
+        let n = g.bodies.len();
+        let GroupState {
+            seg,
+            end,
+            pairs,
+            since,
+            separating,
+            together: solved_together,
+            spin_resolves,
+            prepared,
+            keep_paths,
+        } = s;
+        let prepared_tasks = prepared.as_ref().map_or(0, PreparedPairs::tasks);
+        let (results, prepared_toi) =
+            end_of_step_pairs(g, exec, prepared, (&pairs, &end, &separating));
+        let keys = prepared_toi.as_ref().map(|_| pairs.clone());
+        let timer = g.stage.start(Stage::TimeOfImpact);
+        let mut book = PairBook::new(g, &seg, &end, pairs, results);
+        if let (Some(keys), Some(toi)) = (keys, prepared_toi) {
+            book.known(&keys, toi);
+        }
+        let pieces = PathPieces::new(g, &book);
+        let paths: Vec<Vec<Segment>> = if keep_paths {
+            seg.iter().map(|s| vec![*s]).collect()
+        } else {
+            Vec::new()
         };
-    // Which bodies have left their predicted path (rolled back or woken).
-    let mut left = vec![false; n];
-    // The segments each body took, where asked for (`GroupOutput::paths`).
-    let mut paths: Vec<Vec<Segment>> = if keep_paths {
-        seg.iter().map(|s| vec![*s]).collect()
-    } else {
-        Vec::new()
-    };
-    let mut pieces: Vec<SphereProxy> = Vec::new();
-    let mut events = 0usize;
-    let mut accepted: BTreeSet<PairKey> = BTreeSet::new();
-    // Every rule of the loop is a body's own, so that a group split into
-    // parts (`group::split_group`) decides each as the whole group would:
-    // the events each body took part in (`EVENTS_PER_BODY`), and the last
-    // event that moved it, by world ids (the no-progress rule).
-    let mut events_of = vec![0usize; n];
-    let mut last_of: Vec<Option<(PairKey, f64)>> = vec![None; n];
-    let dynamic = |g: &Region, (a, b): PairKey| {
-        [a as usize, b as usize]
-            .into_iter()
-            .filter(|&i| g.bodies[i].is_dynamic())
-            .collect::<Vec<_>>()
-    };
-    loop {
-        let violation = book.earliest(g, &seg, h, &since, &accepted, exec);
+        EventLoop {
+            h,
+            t0,
+            seg,
+            end,
+            since,
+            separating,
+            solved_together,
+            spin_resolves,
+            book,
+            pieces,
+            left: vec![false; n],
+            keep_paths,
+            paths,
+            events: 0,
+            accepted: BTreeSet::new(),
+            events_of: vec![0usize; n],
+            last_of: vec![None; n],
+            timer,
+            prepared_tasks,
+        }
+    }
+
+    /// Takes the group's next event, if any is left (false once none is).
+    fn take_next(
+        &mut self,
+        g: &mut Region,
+        exec: &mut dyn Executor,
+    ) -> Result<bool, NumericalFailure> {
+        let (pair, tau, spin_resolve) = match self.choose(g, exec) {
+            Choice::Done => return Ok(false),
+            Choice::Accepted => return Ok(true),
+            Choice::Take {
+                pair,
+                tau,
+                spin_resolve,
+            } => (pair, tau, spin_resolve),
+        };
+        let Some(impact) = self.impact_at(g, exec, pair, tau, spin_resolve) else {
+            return Ok(true);
+        };
+        let pair = impact.pair;
+        let world_event = ((g.ids[pair.0 as usize], g.ids[pair.1 as usize]), impact.tau);
+        let own = dynamic_bodies(g, pair);
+        if !own.is_empty() && own.iter().all(|&i| self.last_of[i] == Some(world_event)) {
+            // No progress: keep the small overlap rather than stall the step.
+            self.accept(g, pair);
+            return Ok(true);
+        }
+        self.count_event(g, &impact, spin_resolve, &own);
+        self.roll_back(g, &impact);
+        let members = self.solve_at_impact(g, exec, &impact, &own, world_event)?;
+        self.retest_moved(g, exec, &members);
+        Ok(true)
+    }
+
+    /// Keeps the small overlap of `pair` rather than stall the step.
+    fn accept(&mut self, g: &mut Region, pair: PairKey) {
+        self.accepted.insert(pair);
+        self.book.accept(pair);
+        g.counters.overlaps_accepted += 1;
+    }
+
+    /// The next event: the earliest impact, or a spin resolve due before it.
+    fn choose(&mut self, g: &mut Region, exec: &mut dyn Executor) -> Choice {
+        let violation = self
+            .book
+            .earliest(g, &self.seg, self.h, &self.since, &self.accepted, exec);
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
         // rolls back and is solved as at an impact. Not before the
@@ -397,40 +550,62 @@ pub(crate) fn step_group(
         // events): first those solved with the spinner, then, once its
         // group is found, all of the group's.
         let before_impact = |at: f64| violation.is_none_or(|(_, t)| at < t);
-        let due = spin_resolves
+        let due = self
+            .spin_resolves
             .next(|i| {
-                solved_together
+                self.solved_together
                     .partners(i)
                     .iter()
-                    .fold(seg[i].time, |t, &j| t.max(seg[j].time))
+                    .fold(self.seg[i].time, |t, &j| t.max(self.seg[j].time))
             })
             .filter(|&(at, _)| before_impact(at));
         let spin_resolve = due.is_some();
-        let Some((mut pair, mut tau)) = due.map(|(at, i)| ((i as u32, i as u32), at)).or(violation)
-        else {
-            break;
+        let Some((pair, tau)) = due.map(|(at, i)| ((i as u32, i as u32), at)).or(violation) else {
+            return Choice::Done;
         };
-        let exhausted = dynamic(g, pair)
+        let exhausted = dynamic_bodies(g, pair)
             .iter()
-            .any(|&i| events_of[i] >= EVENTS_PER_BODY);
+            .any(|&i| self.events_of[i] >= EVENTS_PER_BODY);
         if spin_resolve {
-            spin_resolves.take(pair.0 as usize);
+            self.spin_resolves.take(pair.0 as usize);
         } else if exhausted {
             // Out of events: keep the small overlap rather than stall the step.
-            accepted.insert(pair);
-            book.accept(pair);
-            g.counters.overlaps_accepted += 1;
-            continue;
+            self.accept(g, pair);
+            return Choice::Accepted;
         }
-        let (mut group_states, mut group_pairs, mut at_tau) =
-            g.impact_group(exec, pair, tau, &book.partners, &seg, &solved_together);
+        Choice::Take {
+            pair,
+            tau,
+            spin_resolve,
+        }
+    }
+
+    /// The impact group of the event of `pair` at `tau`, or of an earlier
+    /// impact found in it; `None` where a spin resolve must wait for the
+    /// latest segment of its group to start.
+    fn impact_at(
+        &mut self,
+        g: &mut Region,
+        exec: &mut dyn Executor,
+        mut pair: PairKey,
+        mut tau: f64,
+        spin_resolve: bool,
+    ) -> Option<Impact> {
+        let (mut group_states, mut group_pairs, mut at_tau) = g.impact_group(
+            exec,
+            pair,
+            tau,
+            &self.book.partners,
+            &self.seg,
+            &self.solved_together,
+        );
         if spin_resolve {
             let latest = group_states
                 .iter()
-                .fold(tau, |t, &(i, _)| t.max(seg[i].time));
+                .fold(tau, |t, &(i, _)| t.max(self.seg[i].time));
             if latest > tau {
-                spin_resolves.defer(pair.0 as usize, latest);
-                continue;
+                self.spin_resolves.defer(pair.0 as usize, latest);
+                return None;
             }
         }
         // An overlap beyond what a pair carried, found at τ in another
@@ -439,58 +614,83 @@ pub(crate) fn step_group(
         // end (a 0.1 kg box bouncing at 5 m/s between a wall and a
         // hull went 1.3 mm into the hull). Its own impact comes first.
         for _ in 0..MAX_EARLIER_IMPACTS {
-            let Some(earlier) =
-                g.earlier_impact(pair, tau, (&group_pairs, &at_tau), &seg, &since, &accepted)
-            else {
+            let Some(earlier) = g.earlier_impact(
+                pair,
+                tau,
+                (&group_pairs, &at_tau),
+                &self.seg,
+                &self.since,
+                &self.accepted,
+            ) else {
                 break;
             };
             (pair, tau) = earlier;
             g.counters.toi_missed_overlaps += 1;
-            (group_states, group_pairs, at_tau) =
-                g.impact_group(exec, pair, tau, &book.partners, &seg, &solved_together);
+            (group_states, group_pairs, at_tau) = g.impact_group(
+                exec,
+                pair,
+                tau,
+                &self.book.partners,
+                &self.seg,
+                &self.solved_together,
+            );
         }
-        let world_event = ((g.ids[pair.0 as usize], g.ids[pair.1 as usize]), tau);
-        let own = dynamic(g, pair);
-        if !own.is_empty() && own.iter().all(|&i| last_of[i] == Some(world_event)) {
-            // No progress: keep the small overlap rather than stall the step.
-            accepted.insert(pair);
-            book.accept(pair);
-            g.counters.overlaps_accepted += 1;
-            continue;
-        }
+        Some(Impact {
+            pair,
+            tau,
+            states: group_states,
+            pairs: group_pairs,
+            at_tau,
+        })
+    }
+
+    /// Counts the event: a spin resolve, or an impact by its approach.
+    fn count_event(&mut self, g: &mut Region, impact: &Impact, spin_resolve: bool, own: &[usize]) {
+        let pair = impact.pair;
         if spin_resolve && pair.0 == pair.1 {
             g.counters.spin_resolves += 1;
         } else {
-            events += 1;
-            for &i in &own {
-                events_of[i] += 1;
+            self.events += 1;
+            for &i in own {
+                self.events_of[i] += 1;
             }
-            let speed = approach_speed(g, pair, &group_states, &group_pairs, &at_tau, &seg);
+            let speed = approach_speed(
+                g,
+                pair,
+                &impact.states,
+                &impact.pairs,
+                &impact.at_tau,
+                &self.seg,
+            );
             g.counters.toi_events_by_approach[approach_band(speed, g.st.settings)] += 1;
-            g.counters.count_event_rollback(group_states.len());
-            if since.get(&pair).is_some_and(|s| s.touched) {
+            g.counters.count_event_rollback(impact.states.len());
+            if self.since.get(&pair).is_some_and(|s| s.touched) {
                 g.counters.overlap_repairs += 1;
             }
         }
-        let rolled: Vec<usize> = group_states.iter().map(|&(i, _)| i).collect();
-        // Roll the bodies back to τ; a path that had already left its
-        // prediction ends its piece there.
-        for &(i, state) in &group_states {
-            if left[i] {
-                record(g, &mut pieces, i, &seg[i].state, &state);
+    }
+
+    /// Rolls the impact group's bodies back to τ (a path that had already
+    /// left its prediction ends its piece there), and notes what each of
+    /// its pairs carried at τ.
+    fn roll_back(&mut self, g: &Region, impact: &Impact) {
+        let tau = impact.tau;
+        for &(i, state) in &impact.states {
+            if self.left[i] {
+                self.pieces.record(g, i, &self.seg[i].state, &state);
             }
-            left[i] = true;
-            seg[i].state = state;
-            seg[i].time = tau;
-            end[i] = state;
-            let (f, t) = g.external(i, t0 + tau);
-            seg[i].force = f;
-            seg[i].torque = t;
+            self.left[i] = true;
+            self.seg[i].state = state;
+            self.seg[i].time = tau;
+            self.end[i] = state;
+            let (f, t) = g.external(i, self.t0 + tau);
+            self.seg[i].force = f;
+            self.seg[i].torque = t;
         }
-        for (k, r) in group_pairs.iter().zip(&at_tau) {
+        for (k, r) in impact.pairs.iter().zip(&impact.at_tau) {
             let deepest = if r.penetrating { r.depth } else { 0.0 };
             let touched = !r.contacts.is_empty();
-            since.insert(
+            self.since.insert(
                 *k,
                 Since {
                     time: tau,
@@ -499,86 +699,116 @@ pub(crate) fn step_group(
                 },
             );
         }
-        let touching_now = g.touching_from(&group_pairs, &at_tau);
-        let woken = g.wake_touched(&touching_now, &mut seg, tau, t0);
+    }
+
+    /// Wakes what the impact group touches at τ, solves their contacts
+    /// there and re-integrates them to the step's end; returns the bodies
+    /// it moved (sorted).
+    fn solve_at_impact(
+        &mut self,
+        g: &mut Region,
+        exec: &mut dyn Executor,
+        impact: &Impact,
+        own: &[usize],
+        world_event: (PairKey, f64),
+    ) -> Result<Vec<usize>, NumericalFailure> {
+        let (h, t0, tau) = (self.h, self.t0, impact.tau);
+        let rolled: Vec<usize> = impact.states.iter().map(|&(i, _)| i).collect();
+        let touching_now = g.touching_from(&impact.pairs, &impact.at_tau);
+        let woken = g.wake_touched(&touching_now, &mut self.seg, tau, t0);
         let mut members = rolled;
         members.extend(woken);
         members.sort_unstable();
         members.dedup();
-        for &i in members.iter().chain(&own) {
-            left[i] = true;
-            last_of[i] = Some(world_event);
+        for &i in members.iter().chain(own) {
+            self.left[i] = true;
+            self.last_of[i] = Some(world_event);
         }
-        let solved = g.contact_phase(exec, &touching_now, &members, &mut seg, h - tau);
-        solved_together.record(&solved);
-        spin_resolves.schedule(&solved, &members, tau, h);
-        if keep_paths {
+        let solved = g.contact_phase(exec, &touching_now, &members, &mut self.seg, h - tau);
+        self.solved_together.record(&solved);
+        self.spin_resolves.schedule(&solved, &members, tau, h);
+        if self.keep_paths {
             for &i in &members {
-                paths[i].push(seg[i]);
+                self.paths[i].push(self.seg[i]);
             }
         }
         check_states(
-            members.iter().map(|&i| (g.ids[i] as usize, &seg[i].state)),
+            members
+                .iter()
+                .map(|&i| (g.ids[i] as usize, &self.seg[i].state)),
             "solve_islands",
             t0 + tau,
         )?;
-        separating.extend(g.separating_pairs(&touching_now, &seg));
+        self.separating
+            .extend(g.separating_pairs(&touching_now, &self.seg));
         g.impacts.extend(touching_now);
         for &i in &members {
-            end[i] = g.integrate_segment(i, &seg[i], h - tau);
+            self.end[i] = g.integrate_segment(i, &self.seg[i], h - tau);
         }
         g.counters.integrations += members.len() as u64;
-        // The members' new paths may reach new bodies of the group: their
-        // pairs are found and tested again; every other pair stands.
+        Ok(members)
+    }
+
+    /// The members' new paths may reach new bodies of the group: their
+    /// pairs are found and tested again; every other pair stands.
+    fn retest_moved(&mut self, g: &mut Region, exec: &mut dyn Executor, members: &[usize]) {
         let broadphase = g.stage.start(Stage::Broadphase);
-        for &i in &members {
-            book.forget(i);
-            book.sweep(g, i, &seg, &end);
+        for &i in members {
+            self.book.forget(i);
+            self.book.sweep(g, i, &self.seg, &self.end);
         }
-        let redo = book.candidates(g, &members);
+        let redo = self.book.candidates(g, members);
         g.counters.candidate_pairs += redo.len() as u64;
         g.stage.stop(broadphase);
-        let redone = g.narrowphase_skipping_separating(exec, &redo, &end, &separating);
+        let redone = g.narrowphase_skipping_separating(exec, &redo, &self.end, &self.separating);
         for (k, r) in redo.into_iter().zip(redone) {
-            book.insert(k, r);
+            self.book.insert(k, r);
         }
     }
-    for i in 0..n {
-        if left[i] {
-            record(g, &mut pieces, i, &seg[i].state, &end[i]);
+
+    /// The group's output once no event is left: the region's state moves
+    /// into it, with the paths and pieces the bodies took.
+    fn finish(mut self, g: &mut Region) -> GroupOutput {
+        for i in 0..self.left.len() {
+            if self.left[i] {
+                self.pieces.record(g, i, &self.seg[i].state, &self.end[i]);
+            }
+        }
+        g.counters.toi_events += self.events as u64;
+        let book = self.book;
+        g.count_speculative_ghosts(|(a, b)| {
+            book.results
+                .get(&(a.0, b.0))
+                .is_some_and(|r| !r.contacts.is_empty())
+        });
+        g.stage.stop(self.timer);
+        let (pairs, results) = book.results.into_iter().unzip();
+        let left = self.left;
+        let mut paths = self.paths;
+        let paths = (0..paths.len())
+            .filter(|&i| left[i])
+            .map(|i| (g.ids[i], std::mem::take(&mut paths[i])))
+            .collect();
+        use std::mem::take;
+        GroupOutput {
+            paths,
+            ids: take(&mut g.ids),
+            bodies: take(g.bodies),
+            sleep_timer: take(g.sleep_timer),
+            end: self.end,
+            pairs,
+            results,
+            warm: take(g.warm).into_iter().collect(),
+            impacts: take(g.impacts),
+            pair_forces: take(&mut g.pair_forces).into_iter().collect(),
+            counters: take(g.counters),
+            stage: take(g.stage),
+            events: self.events as u64,
+            pieces: self.pieces.pieces,
+            busy_s: 0.0,
+            prepared_tasks: self.prepared_tasks,
         }
     }
-    g.counters.toi_events += events as u64;
-    g.count_speculative_ghosts(|(a, b)| {
-        book.results
-            .get(&(a.0, b.0))
-            .is_some_and(|r| !r.contacts.is_empty())
-    });
-    g.stage.stop(timer);
-    let (pairs, results) = book.results.into_iter().unzip();
-    let paths = (0..paths.len())
-        .filter(|&i| left[i])
-        .map(|i| (g.ids[i], std::mem::take(&mut paths[i])))
-        .collect();
-    use std::mem::take;
-    Ok(GroupOutput {
-        paths,
-        ids: take(&mut g.ids),
-        bodies: take(g.bodies),
-        sleep_timer: take(g.sleep_timer),
-        end,
-        pairs,
-        results,
-        warm: take(g.warm).into_iter().collect(),
-        impacts: take(g.impacts),
-        pair_forces: take(&mut g.pair_forces).into_iter().collect(),
-        counters: take(g.counters),
-        stage: take(g.stage),
-        events: events as u64,
-        pieces,
-        busy_s: 0.0,
-        prepared_tasks,
-    })
 }
 
 /// How fast a pair approaches at its impact: the fastest closing speed of
