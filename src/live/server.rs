@@ -1,5 +1,5 @@
-//! The HTTP and WebSocket server of `rigidsim live` (and of `rigidsim view
-//! --serve`): axum on a tokio runtime of one thread beside the simulation.
+//! The HTTP and WebSocket server of `rigidsim live`: axum on a tokio
+//! runtime of one thread beside the simulation (`crate::view::http`).
 //! The live run's page at `/`, its WebSocket at `/ws` (messages in
 //! `protocol`).
 //!
@@ -12,18 +12,20 @@
 //! grab, released when it goes away.
 
 use super::protocol::{self, Input, SceneFacts};
+pub use crate::view::http::Server;
+use crate::view::http::{plain, spawn};
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
-use axum::http::{HeaderMap, Method, StatusCode, header};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
-use std::time::{Duration, Instant};
-use tokio::sync::{oneshot, watch};
+use std::time::Instant;
+use tokio::sync::watch;
 
 /// A message larger than this closes its connection (tungstenite's own
 /// limit); between `protocol::MAX_MESSAGE_BYTES` and this it is answered
@@ -46,7 +48,8 @@ pub struct Shared {
     /// Required as `?token=` on every request, when bound beyond loopback.
     pub token: Option<String>,
     next_hand: AtomicU32,
-    open: AtomicUsize,
+    /// Connections open now (the server waits for them when it stops).
+    open: Arc<AtomicUsize>,
 }
 
 impl Shared {
@@ -66,32 +69,12 @@ impl Shared {
             inputs: Mutex::new(inputs),
             token,
             next_hand: AtomicU32::new(1),
-            open: AtomicUsize::new(0),
+            open: Arc::new(AtomicUsize::new(0)),
         }
     }
 
     fn send(&self, hand: u32, input: Input) -> bool {
         self.inputs.lock().unwrap().send((hand, input)).is_ok()
-    }
-}
-
-/// A running server: its address, and how to stop it.
-pub struct Server {
-    pub addr: SocketAddr,
-    stop: Option<oneshot::Sender<()>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Server {
-    /// Stops accepting, lets open connections send what they hold (up to a
-    /// second), and ends the server's thread.
-    pub fn stop(mut self) {
-        if let Some(stop) = self.stop.take() {
-            let _ = stop.send(());
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
     }
 }
 
@@ -103,45 +86,6 @@ pub fn random_token() -> std::io::Result<String> {
     Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
-/// Binds `addr` now (so a port in use is an error here, and port 0 is
-/// known) and serves `router` on a thread of its own until stopped.
-fn spawn(addr: SocketAddr, router: Router, open: Option<Arc<Shared>>) -> std::io::Result<Server> {
-    let listener = std::net::TcpListener::bind(addr)?;
-    listener.set_nonblocking(true)?;
-    let addr = listener.local_addr()?;
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
-    let (stop, stopped) = oneshot::channel::<()>();
-    let thread = std::thread::Builder::new()
-        .name("live-server".into())
-        .spawn(move || {
-            runtime.block_on(async move {
-                let Ok(listener) = tokio::net::TcpListener::from_std(listener) else {
-                    return;
-                };
-                let _ = axum::serve(listener, router)
-                    .with_graceful_shutdown(async {
-                        let _ = stopped.await;
-                    })
-                    .await;
-                // Upgraded connections are not the server's to wait for:
-                // give them a moment to send the live run's last messages.
-                if let Some(shared) = open {
-                    let until = Instant::now() + Duration::from_secs(1);
-                    while shared.open.load(Ordering::SeqCst) > 0 && Instant::now() < until {
-                        tokio::time::sleep(Duration::from_millis(10)).await;
-                    }
-                }
-            });
-        })?;
-    Ok(Server {
-        addr,
-        stop: Some(stop),
-        thread: Some(thread),
-    })
-}
-
 /// Starts the live run's server on `addr`.
 pub fn start_live(addr: SocketAddr, shared: Arc<Shared>) -> std::io::Result<Server> {
     let router = Router::new()
@@ -151,66 +95,8 @@ pub fn start_live(addr: SocketAddr, shared: Arc<Shared>) -> std::io::Result<Serv
         .route("/favicon.ico", get(|| async { StatusCode::NO_CONTENT }))
         .fallback(not_found)
         .with_state(Arc::clone(&shared));
-    spawn(addr, router, Some(shared))
-}
-
-/// `rigidsim view --serve`: `page` at `/` and `/replay.html` on
-/// 127.0.0.1:`port` until the process ends; prints the address first.
-pub fn serve_page(page: Vec<u8>, port: u16) -> std::io::Result<()> {
-    let page = Arc::new(page);
-    let only_get = || async { plain(StatusCode::METHOD_NOT_ALLOWED, "only GET\n") };
-    let the_page = || {
-        let page = Arc::clone(&page);
-        get(move || async move { replay_page(&page) }).fallback(only_get)
-    };
-    let router = Router::new()
-        .route("/", the_page())
-        .route("/replay.html", the_page())
-        .fallback(|method: Method| async move {
-            if method == Method::GET || method == Method::HEAD {
-                plain(StatusCode::NOT_FOUND, "not found: the replay is at /\n")
-            } else {
-                plain(StatusCode::METHOD_NOT_ALLOWED, "only GET\n")
-            }
-        });
-    let server = spawn((std::net::Ipv4Addr::LOCALHOST, port).into(), router, None)?;
-    let port = server.addr.port();
-    println!(
-        "serving at http://127.0.0.1:{port}/ (Ctrl-C stops; from another machine: ssh -L {port}:127.0.0.1:{port} THIS_HOST, then open that address there)"
-    );
-    use std::io::Write;
-    let _ = std::io::stdout().flush();
-    if let Some(t) = server.thread {
-        let _ = t.join();
-    }
-    Ok(())
-}
-
-/// A page or a short text, never cached, on a connection that then closes
-/// (one file is all a replay asks for).
-fn replay_page(page: &[u8]) -> Response {
-    (
-        [
-            (header::CONTENT_TYPE, "text/html; charset=utf-8"),
-            (header::CACHE_CONTROL, "no-store"),
-            (header::CONNECTION, "close"),
-        ],
-        page.to_vec(),
-    )
-        .into_response()
-}
-
-fn plain(status: StatusCode, text: &'static str) -> Response {
-    (
-        status,
-        [
-            (header::CONTENT_TYPE, "text/plain; charset=utf-8"),
-            (header::CACHE_CONTROL, "no-store"),
-            (header::CONNECTION, "close"),
-        ],
-        text,
-    )
-        .into_response()
+    let open = Arc::clone(&shared.open);
+    spawn(addr, router, Some(open))
 }
 
 async fn not_found() -> Response {

@@ -12,6 +12,7 @@
 //! and refuses a folder that `summary.json` says was written from another
 //! scene, or from another version of this one. No MPI.
 
+pub(crate) mod http;
 pub(crate) mod mesh;
 mod page;
 pub(crate) mod replay_data;

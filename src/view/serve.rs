@@ -1,7 +1,7 @@
 //! `--serve PORT`: the page over HTTP on 127.0.0.1 only, for a browser on
 //! another machine that reaches it through ssh port forwarding
 //! (`ssh -L PORT:127.0.0.1:PORT HOST`). Loopback keeps the run off the
-//! network. The same HTTP stack as `rigidsim live` (`crate::live::server`).
+//! network. The same HTTP stack as `rigidsim live` (`super::http`).
 
 use super::ViewError;
 use std::path::Path;
@@ -11,6 +11,6 @@ use std::path::Path;
 pub fn serve(page: &Path, port: u16) -> Result<(), ViewError> {
     let body = std::fs::read(page)
         .map_err(|e| ViewError::Io(format!("cannot read {}: {e}", page.display())))?;
-    crate::live::server::serve_page(body, port)
+    super::http::serve_page(body, port)
         .map_err(|e| ViewError::Io(format!("cannot listen on 127.0.0.1:{port}: {e}")))
 }
