@@ -591,14 +591,7 @@ impl EventLoop {
         mut tau: f64,
         spin_resolve: bool,
     ) -> Option<Impact> {
-        let (mut group_states, mut group_pairs, mut at_tau) = g.impact_group(
-            exec,
-            pair,
-            tau,
-            &self.book.partners,
-            &self.seg,
-            &self.solved_together,
-        );
+        let (mut group_states, mut group_pairs, mut at_tau) = self.group_at(g, exec, pair, tau);
         if spin_resolve {
             let latest = group_states
                 .iter()
@@ -626,14 +619,7 @@ impl EventLoop {
             };
             (pair, tau) = earlier;
             g.counters.toi_missed_overlaps += 1;
-            (group_states, group_pairs, at_tau) = g.impact_group(
-                exec,
-                pair,
-                tau,
-                &self.book.partners,
-                &self.seg,
-                &self.solved_together,
-            );
+            (group_states, group_pairs, at_tau) = self.group_at(g, exec, pair, tau);
         }
         Some(Impact {
             pair,
@@ -642,6 +628,26 @@ impl EventLoop {
             pairs: group_pairs,
             at_tau,
         })
+    }
+
+    /// The bodies that must move with an impact of `pair` at `tau`, with
+    /// their states there, their pairs and those pairs' results at `tau`
+    /// (`Region::impact_group` over the loop's partners and segments).
+    fn group_at(
+        &self,
+        g: &mut Region,
+        exec: &mut dyn Executor,
+        pair: PairKey,
+        tau: f64,
+    ) -> (Vec<(usize, BodyState)>, Vec<PairKey>, Vec<PairResult>) {
+        g.impact_group(
+            exec,
+            pair,
+            tau,
+            &self.book.partners,
+            &self.seg,
+            &self.solved_together,
+        )
     }
 
     /// Counts the event: a spin resolve, or an impact by its approach.
