@@ -50,7 +50,7 @@ for pour in $POURS; do
   run_opts=("${opts[@]}")
   case $pour in
     1000) run_opts=(--duration "$BIG_DURATION") ;;
-    zero-g) run_opts=() ;;
+    zero-g) run_opts=(); "$bin" export "$scene" --to "$tmp/zero-g.json" ;;
   esac
   for dial in $DIALS; do
     dir=$tmp/run-$pour-$dial
@@ -60,7 +60,6 @@ for pour in $POURS; do
       echo "bench_dial: run failed ($pour, $dial)" >&2
     drift=-
     if [ "$pour" = zero-g ] && [ -f "$dir/trajectory.csv" ]; then
-      "$bin" export "$scene" --to "$tmp/zero-g.json"
       drift=$(python3 scripts/drift.py "$tmp/zero-g.json" "$dir/trajectory.csv" | tr ' ' ,)
     fi
     rows+=("$pour $dial $dir $drift")
