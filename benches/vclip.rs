@@ -14,7 +14,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use parry3d_f64::math::{Pose as PPose, Rotation as PRot, Vector as PVec};
 use parry3d_f64::query;
 use parry3d_f64::shape::ConvexPolyhedron as ParryPoly;
-use rigidsim::collision::polyhedron::ConvexPolyhedron;
+use rigidsim::polyhedron::ConvexPolyhedron;
 use rigidsim::collision::vclip::{FeaturePair, closest_features};
 
 const FRAMES: usize = 2000;

@@ -5,7 +5,8 @@
 //! (islands, Dantzig LCP), `dynamics` (integration), `step` (the frame loop),
 //! `cluster` (everything MPI), `render` (off-screen frames), `output`
 //! (trajectory, summary, progress), `export` (a scene as JSON for other tools),
-//! `math` (sines with the same bits on every host).
+//! `math` (sines with the same bits on every host), `polyhedron` (convex
+//! shapes, below `body` and `collision`).
 
 pub mod body;
 pub mod cluster;
@@ -16,6 +17,7 @@ pub mod export;
 pub mod interrupt;
 pub mod math;
 pub mod output;
+pub mod polyhedron;
 pub mod render;
 pub mod run;
 pub mod scene;

@@ -3,7 +3,7 @@
 
 pub mod mass;
 
-use crate::collision::polyhedron::ConvexPolyhedron;
+use crate::polyhedron::ConvexPolyhedron;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 

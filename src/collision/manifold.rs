@@ -17,7 +17,7 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::polyhedron::ConvexPolyhedron;
+use crate::polyhedron::ConvexPolyhedron;
 use super::sat::separating_axis;
 pub use super::vclip::{FACE_CONTACT_COS, FACE_CONTACT_SIN};
 use super::vclip::{Feature, Proximity, closest_segment_points};

@@ -6,6 +6,5 @@ pub mod broadphase;
 pub mod manifold;
 pub mod narrowphase;
 pub mod patch;
-pub mod polyhedron;
 pub mod sat;
 pub mod vclip;

@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::polyhedron::ConvexPolyhedron;
+use crate::polyhedron::ConvexPolyhedron;
 
 /// The cosine and sine of `FACE_CONTACT_ANGLE` (`math::cos`, `math::sin`,
 /// to the bit: a test checks them). Written out because the `libm` crate's

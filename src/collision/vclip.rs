@@ -40,7 +40,7 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::polyhedron::{ConvexPolyhedron, VoronoiPlane};
+use crate::polyhedron::{ConvexPolyhedron, VoronoiPlane};
 use super::sat::AxisKind;
 pub use super::sat::separating_axis;
 use super::sat::xf;

@@ -15,7 +15,7 @@
 use super::Settings;
 use crate::body::ObjectDef;
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
-use crate::collision::polyhedron::ConvexPolyhedron;
+use crate::polyhedron::ConvexPolyhedron;
 use nalgebra::Vector3;
 
 /// Largest |coordinate| of a body's placement, or of a scatter box, on each

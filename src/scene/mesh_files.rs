@@ -6,7 +6,7 @@
 //! wound and convex, and merges coplanar triangles into faces. With
 //! `hull = true` the convex hull of all vertices is taken instead.
 
-use crate::collision::polyhedron::{self, ConvexPolyhedron};
+use crate::polyhedron::{self, ConvexPolyhedron};
 use nalgebra::Vector3;
 use std::path::Path;
 

@@ -15,7 +15,7 @@ use crate::body::{
     Activity, Body, BodyId, BodyKind, BodyState, BoundingSphere, ObjectDef, ObjectId, Part,
 };
 use crate::collision::narrowphase::{CONTACT_TOLERANCE, NEAR_FROM};
-use crate::collision::polyhedron::{ConvexPolyhedron, Face};
+use crate::polyhedron::{ConvexPolyhedron, Face};
 use crate::math;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
@@ -779,7 +779,7 @@ fn build_object(
 /// centred on the slab's middle and reaches the farthest point of the part
 /// inside the slab. Those points are vertices of (part ∩ slab): the part's own
 /// vertices in the slab and the crossings of its edges with the slab planes.
-pub fn part_spheres(hull: &crate::collision::polyhedron::ConvexPolyhedron) -> Vec<BoundingSphere> {
+pub fn part_spheres(hull: &crate::polyhedron::ConvexPolyhedron) -> Vec<BoundingSphere> {
     let verts = hull.vertices();
     let (center, radius) = hull.bounding_sphere();
     let mut lo = verts[0];

@@ -4,7 +4,7 @@
 use super::mesh_files;
 pub use super::mesh_files::NamedPart;
 use super::schema::ShapeSpec;
-use crate::collision::polyhedron::ConvexPolyhedron;
+use crate::polyhedron::ConvexPolyhedron;
 use crate::math;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;

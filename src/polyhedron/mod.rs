@@ -1,5 +1,6 @@
-//! Convex polyhedra for the narrowphase: winged-edge topology plus the
-//! Voronoi-region planes that V-Clip (`super::vclip`) walks.
+//! Convex polyhedra, the shape of every body part: winged-edge topology plus
+//! the Voronoi-region planes that V-Clip (`crate::collision::vclip`) walks.
+//! A leaf below `body` and `collision`: it imports nothing of the crate.
 //!
 //! Conventions, relied on by `vclip` and `manifold`:
 //! - Face loops run counter-clockwise seen from outside; `Face::normal` is the
