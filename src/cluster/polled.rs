@@ -65,9 +65,6 @@ impl Executor for Polled<'_> {
         (self.poll)();
         self.inline.prepare_groups(st, params, inputs)
     }
-    fn poll(&mut self) {
-        (self.poll)();
-    }
     fn finish(&mut self) -> (Vec<RankSummary>, Distribution) {
         self.inline.finish()
     }

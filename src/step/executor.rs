@@ -57,12 +57,6 @@ pub trait Executor {
     /// The step's groups are all stepped (after `split_groups`), so what
     /// its choice cost can be measured.
     fn groups_stepped(&mut self) {}
-    /// Called between a group step's pieces of work that use no other
-    /// stage (each pair's time of impact): rank 0, stepping a group of its
-    /// own, answers the workers there (`cluster::Polled`), so that one
-    /// done with its chunk gets the next within microseconds. Changes no
-    /// result.
-    fn poll(&mut self) {}
     /// The scene's external forces changed at a step boundary (a live
     /// live run's hand, `run --inputs`): every rank that steps groups must
     /// integrate with these from the next step on. Inline: nothing to do,

@@ -283,8 +283,7 @@ pub(crate) fn group_input(
 }
 
 /// The first stage of group `input`'s step for its pairs `from..to`
-/// (`PreparedPairs`), on any rank; `exec` runs its narrowphase batch and
-/// is polled before each pair's time of impact (`Executor::poll`).
+/// (`PreparedPairs`), on any rank; `exec` runs its narrowphase batch.
 pub fn prepare_pairs(
     st: &StepStatic,
     input: &GroupInput,
@@ -314,10 +313,7 @@ pub fn prepare_pairs(
     let toi = pairs
         .iter()
         .zip(&results)
-        .map(|(&k, r)| {
-            exec.poll();
-            g.time_of_impact(k, r, &input.seg, h, &since)
-        })
+        .map(|(&k, r)| g.time_of_impact(k, r, &input.seg, h, &since))
         .collect();
     g.stage.stop(timer);
     PreparedPairs {

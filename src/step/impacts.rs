@@ -201,13 +201,11 @@ impl PairBook {
         h: f64,
         since: &SolvedSince,
         accepted: &BTreeSet<PairKey>,
-        exec: &mut dyn Executor,
     ) -> Option<(PairKey, f64)> {
         for k in std::mem::take(&mut self.dirty) {
             if accepted.contains(&k) {
                 continue;
             }
-            exec.poll();
             let search = g.begin_time_of_impact(k, &self.results[&k], seg, h, since);
             self.wait_or_find(k, search);
         }
@@ -227,7 +225,6 @@ impl PairBook {
                 .searches
                 .remove(&k)
                 .expect("every waiting pair has its search");
-            exec.poll();
             let search = g.continue_search(search, seg, limit);
             self.wait_or_find(k, search);
         }
@@ -504,7 +501,7 @@ impl EventLoop {
         g: &mut Region,
         exec: &mut dyn Executor,
     ) -> Result<bool, NumericalFailure> {
-        let (pair, tau, spin_resolve) = match self.choose(g, exec) {
+        let (pair, tau, spin_resolve) = match self.choose(g) {
             Choice::Done => return Ok(false),
             Choice::Accepted => return Ok(true),
             Choice::Take {
@@ -539,10 +536,10 @@ impl EventLoop {
     }
 
     /// The next event: the earliest impact, or a spin resolve due before it.
-    fn choose(&mut self, g: &mut Region, exec: &mut dyn Executor) -> Choice {
+    fn choose(&mut self, g: &mut Region) -> Choice {
         let violation = self
             .book
-            .earliest(g, &self.seg, self.h, &self.since, &self.accepted, exec);
+            .earliest(g, &self.seg, self.h, &self.since, &self.accepted);
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
         // rolls back and is solved as at an impact. Not before the
