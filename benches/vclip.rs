@@ -14,8 +14,8 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use parry3d_f64::math::{Pose as PPose, Rotation as PRot, Vector as PVec};
 use parry3d_f64::query;
 use parry3d_f64::shape::ConvexPolyhedron as ParryPoly;
-use rigidsim::polyhedron::ConvexPolyhedron;
 use rigidsim::collision::vclip::{FeaturePair, closest_features};
+use rigidsim::polyhedron::ConvexPolyhedron;
 
 const FRAMES: usize = 2000;
 /// Each measurement repeats the path until it has run this long.

@@ -21,6 +21,7 @@ use live::driver::LiveDriver;
 use live::inputs::Recording;
 use mpi::topology::{Communicator, SimpleCommunicator};
 use mpi::traits::Root;
+use rigidsim::cluster::predict::{LinkModel, Prediction};
 use rigidsim::cluster::{self, MpiExecutor, RemoteFrames, Roles};
 use rigidsim::output::checkpoint::Checkpoint;
 use rigidsim::output::summary::RankHost;
@@ -67,6 +68,9 @@ enum Command {
     /// any browser (one self-contained file; no MPI).
     View(ViewArgs),
 }
+
+/// `LinkModel::LAB_100_MBIT`'s latency in the unit of `--link-latency-us`.
+const LAB_LATENCY_US: f64 = 550.0;
 
 #[derive(Args, Debug)]
 struct RunArgs {
@@ -122,6 +126,15 @@ struct RunArgs {
     /// Distribute every stage whatever its size (tests of determinism and balance).
     #[arg(long)]
     force_distribute: bool,
+    /// The link a one-rank run predicts the cluster over (summary.json's
+    /// `distributed.predicted`): one-way latency in microseconds (default
+    /// half the 1.1 ms round trip of a lab's 100 Mbit/s network).
+    #[arg(long, value_name = "US", default_value_t = LAB_LATENCY_US)]
+    link_latency_us: f64,
+    /// The same link's rate in bytes per second (default the 7.7 MB/s of
+    /// MPI payload a lab's 100 Mbit/s network carries).
+    #[arg(long, value_name = "B", default_value_t = LinkModel::LAB_100_MBIT.bytes_per_s)]
+    link_bytes_per_s: f64,
     /// Write the full simulation state to OUT/checkpoint.bin every S
     /// simulated seconds and at the end (atomically: a crash keeps the last one).
     #[arg(long, value_name = "S")]
@@ -487,10 +500,27 @@ fn run_options(cli: &RunArgs, live: bool) -> RunOptions {
     }
 }
 
+/// The predicted link's parameters are numbers a link can have.
+fn check_link(cli: &RunArgs) -> Result<(), String> {
+    let (latency, rate) = (cli.link_latency_us, cli.link_bytes_per_s);
+    if !latency.is_finite() || latency < 0.0 {
+        return Err(format!(
+            "--link-latency-us must be a finite number ≥ 0 (got {latency})"
+        ));
+    }
+    if !rate.is_finite() || rate <= 0.0 {
+        return Err(format!(
+            "--link-bytes-per-s must be a finite number > 0 (got {rate})"
+        ));
+    }
+    Ok(())
+}
+
 /// The scene with the command line's overrides (`live`: a live run).
 fn load_scene(cli: &RunArgs, opts: &RunOptions, live: bool) -> Result<Scene, String> {
     let mut scene = rigidsim::scene::load(&cli.scene).map_err(|e| e.to_string())?;
     run::apply_overrides(&mut scene, opts)?;
+    check_link(cli)?;
     // A live run may last hours: its trajectory is sampled at the scene's
     // `sample_every` where given, otherwise at the frame interval, not at
     // every step (docs/live.md states what an hour costs on disk).
@@ -644,7 +674,11 @@ impl Coordinator {
     /// drawn here or by the renderer rank, and the run's outcome told.
     fn run(mut self, job: &Job) -> ExitCode {
         let world = job.world;
-        let mut inline = Inline::default();
+        let link = LinkModel {
+            latency_s: self.cli.link_latency_us / 1e6,
+            bytes_per_s: self.cli.link_bytes_per_s,
+        };
+        let mut inline = Inline::profiled(Box::new(Prediction::new(link)));
         let mut mpi_exec;
         let mut link_rates = Vec::new();
         let exec: &mut dyn Executor = if self.roles.workers.is_empty() {

@@ -318,6 +318,8 @@ fn bad_command_line_override_exits_2_naming_the_option() {
         ("--dt", "0"),
         ("--duration", "-1.0"),
         ("--sample-every", "nan"),
+        ("--link-latency-us", "-1"),
+        ("--link-bytes-per-s", "0"),
     ] {
         let arg = format!("{flag}={value}");
         let o = case.run(&[&arg]);

@@ -1167,3 +1167,92 @@ fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
         last = s;
     }
 }
+
+/// A one-rank run predicts the whole step on 2 to 16 ranks from its own
+/// tasks (`distributed.predicted`, `cluster::predict`): never slower than
+/// one rank (a stage stays home where sharing it does not pay), at most R
+/// times faster, growing with R, never past the Amdahl bound of the work
+/// the stages hold, and as many seconds as the run took at one rank. Over
+/// a link that costs nothing the stages are shared out (`--link-*` change
+/// no result). Runs on several ranks predict nothing: their tasks ran
+/// elsewhere.
+#[test]
+fn one_rank_predicts_the_whole_step_on_several_ranks() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let nuts = scene("nuts_and_bolts.toml");
+    let lab = run(
+        root.path(),
+        "lab",
+        Ranks::Alone,
+        &nuts,
+        &["--duration", "1.0", "--no-render"],
+    );
+    let d = &lab.summary["distributed"];
+    let link = &d["prediction_link"];
+    assert_eq!(link["latency_s"].as_f64(), Some(550e-6));
+    assert_eq!(link["bytes_per_s"].as_f64(), Some(7.7e6));
+    let wall = lab.summary["wall_time_s"].as_f64().unwrap();
+    let amdahl = d["amdahl_bound"].as_f64().unwrap();
+    let speedups = |d: &serde_json::Value| -> Vec<f64> {
+        let predicted = d["predicted"].as_array().unwrap();
+        let ranks: Vec<u64> = predicted
+            .iter()
+            .map(|p| p["ranks"].as_u64().unwrap())
+            .collect();
+        assert_eq!(ranks, [2, 4, 8, 16]);
+        predicted
+            .iter()
+            .map(|p| p["speedup"].as_f64().unwrap())
+            .collect()
+    };
+    let mut last = 1.0;
+    for (p, s) in d["predicted"].as_array().unwrap().iter().zip(speedups(d)) {
+        let r = p["ranks"].as_f64().unwrap();
+        assert!(s >= last && s <= r, "{s} on {r} ranks after {last}");
+        // The profile's seconds are the run's, give or take the set-up
+        // before the first step and the outputs after the last.
+        let one_rank = s * p["wall_s"].as_f64().unwrap();
+        assert!(
+            (one_rank - wall).abs() <= 0.1 * wall,
+            "{one_rank} s of a {wall} s run"
+        );
+        assert!(s <= amdahl * 1.1, "{s} beyond the Amdahl bound {amdahl}");
+        last = s;
+    }
+    let free = run(
+        root.path(),
+        "free",
+        Ranks::Alone,
+        &nuts,
+        &[
+            "--duration",
+            "1.0",
+            "--no-render",
+            "--link-latency-us",
+            "0",
+            "--link-bytes-per-s",
+            "1e300",
+        ],
+    );
+    assert_eq!(free.summary["state_hash"], lab.summary["state_hash"]);
+    let f = &free.summary["distributed"];
+    assert!(
+        speedups(f)[3] > 1.0,
+        "a free link shares the stages out: {:?}",
+        speedups(f)
+    );
+    let two = run(
+        root.path(),
+        "two",
+        Ranks::Np(2),
+        &nuts,
+        &["--duration", "0.3", "--no-render"],
+    );
+    assert_eq!(
+        two.summary["distributed"]["predicted"]
+            .as_array()
+            .map(Vec::len),
+        Some(0)
+    );
+}

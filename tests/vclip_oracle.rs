@@ -8,11 +8,11 @@ use parry3d_f64::shape::ConvexPolyhedron as ParryPoly;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rigidsim::collision::manifold::{ContactPoint, contact_points};
-use rigidsim::polyhedron::{ConvexPolyhedron, PolyhedronError, weld};
 use rigidsim::collision::vclip::{
     Feature, FeaturePair, Proximity, closest_features, closest_features_with_limit, exhaustive,
     separating_axis,
 };
+use rigidsim::polyhedron::{ConvexPolyhedron, PolyhedronError, weld};
 
 // ---------------------------------------------------------------- shapes
 

@@ -7,6 +7,7 @@
 //! and `--no-render` is not given, otherwise it is a worker too. One rank runs
 //! the same stages inline.
 
+pub mod predict;
 pub mod protocol;
 pub mod schedule;
 

@@ -29,7 +29,7 @@ const CHUNKS_IN_FLIGHT: usize = 1;
 /// ones at the end, where an estimate that was off could leave a rank
 /// waiting. By speed, because a stage often ends with every worker's first
 /// chunk, and equal chunks would leave it waiting for the slowest rank.
-const CHUNK_SHARE: f64 = 0.5;
+pub(super) const CHUNK_SHARE: f64 = 0.5;
 
 /// How often rank 0 looks for answers while it steps a group of its own
 /// (`Polled`): a probe per worker costs about a microsecond, and an event

@@ -17,10 +17,10 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::polyhedron::ConvexPolyhedron;
 use super::sat::separating_axis;
 pub use super::vclip::{FACE_CONTACT_COS, FACE_CONTACT_SIN};
 use super::vclip::{Feature, Proximity, closest_segment_points};
+use crate::polyhedron::ConvexPolyhedron;
 
 /// A face counts as facing the other body, and an edge as lying across the
 /// normal, within this angle (radians, ≈ 0.57°). Large enough for a box

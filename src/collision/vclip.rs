@@ -40,10 +40,10 @@
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::polyhedron::{ConvexPolyhedron, VoronoiPlane};
 use super::sat::AxisKind;
 pub use super::sat::separating_axis;
 use super::sat::xf;
+use crate::polyhedron::{ConvexPolyhedron, VoronoiPlane};
 
 pub use super::sat::{FACE_CONTACT_COS, FACE_CONTACT_SIN};
 

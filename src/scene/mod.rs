@@ -15,8 +15,8 @@ use crate::body::{
     Activity, Body, BodyId, BodyKind, BodyState, BoundingSphere, ObjectDef, ObjectId, Part,
 };
 use crate::collision::narrowphase::{CONTACT_TOLERANCE, NEAR_FROM};
-use crate::polyhedron::{ConvexPolyhedron, Face};
 use crate::math;
+use crate::polyhedron::{ConvexPolyhedron, Face};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use schema::{CombineRule, ObjectSection, SceneFile};

@@ -4,8 +4,8 @@
 use super::mesh_files;
 pub use super::mesh_files::NamedPart;
 use super::schema::ShapeSpec;
-use crate::polyhedron::ConvexPolyhedron;
 use crate::math;
+use crate::polyhedron::ConvexPolyhedron;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
 use std::path::Path;

@@ -32,6 +32,7 @@ mod frame;
 mod group;
 mod impacts;
 mod kept;
+pub mod profile;
 mod region;
 mod settings;
 mod sleep;
@@ -60,7 +61,9 @@ use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
+use profile::{Profiler, StageKind, StepSink, wire_bytes};
 use region::Region;
+use serde::Serialize;
 use stats::{Distribution, GroupWork, RankSummary};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
@@ -73,6 +76,42 @@ pub struct Inline {
     narrowphase_tasks: u64,
     island_tasks: u64,
     dist: Distribution,
+    /// Records the outermost stage calls' tasks, where the run asks for
+    /// the speed-up on several ranks (`Inline::profiled`).
+    profiler: Option<Profiler>,
+}
+
+impl Inline {
+    /// An `Inline` whose stage calls `sink` sees, step by step.
+    pub fn profiled(sink: Box<dyn StepSink>) -> Self {
+        Inline {
+            profiler: Some(Profiler::new(sink)),
+            ..Default::default()
+        }
+    }
+
+    /// Runs `f` on each task; with a profiler, as one stage call of `kind`.
+    fn each<T: Serialize, R: Serialize>(
+        &mut self,
+        kind: StageKind,
+        tasks: &[T],
+        mut f: impl FnMut(&T) -> R,
+    ) -> Vec<R> {
+        let Some(profiler) = &mut self.profiler else {
+            return tasks.iter().map(f).collect();
+        };
+        let answers = tasks
+            .iter()
+            .map(|t| {
+                let started = Instant::now();
+                let answer = f(t);
+                profiler.task(started, t, &answer);
+                answer
+            })
+            .collect();
+        profiler.end_call(kind);
+        answers
+    }
 }
 
 impl Executor for Inline {
@@ -81,10 +120,9 @@ impl Executor for Inline {
         let clock = Instant::now();
         self.narrowphase_tasks += tasks.len() as u64;
         self.dist.narrowphase_local += 1;
-        let r = tasks
-            .iter()
-            .map(|t| narrowphase::query_pair(objects, t))
-            .collect();
+        let r = self.each(StageKind::Narrowphase, &tasks, |t| {
+            narrowphase::query_pair(objects, t)
+        });
         self.busy_s += clock.elapsed().as_secs_f64();
         self.dist.distributable_s += self.clock.leave();
         r
@@ -94,7 +132,7 @@ impl Executor for Inline {
         let clock = Instant::now();
         self.island_tasks += tasks.len() as u64;
         self.dist.solve_local += 1;
-        let r = tasks.iter().map(solver::solve_island).collect();
+        let r = self.each(StageKind::IslandSolves, &tasks, solver::solve_island);
         self.busy_s += clock.elapsed().as_secs_f64();
         self.dist.distributable_s += self.clock.leave();
         r
@@ -108,10 +146,24 @@ impl Executor for Inline {
         // Busy time and tasks are counted by the stages the groups call.
         self.clock.enter();
         self.dist.groups_local += 1;
+        // Taken out while the groups step: the calls they make are theirs.
+        let mut profiler = self.profiler.take();
         let replies = inputs
             .into_iter()
-            .map(|input| group::run_group(st, input, self))
+            .map(|input| {
+                let started = Instant::now();
+                let bytes = profiler.as_ref().map(|_| wire_bytes(&input));
+                let reply = group::run_group(st, input, self);
+                if let (Some(p), Some(bytes)) = (&mut profiler, bytes) {
+                    p.task_of(started, bytes + wire_bytes(&reply));
+                }
+                reply
+            })
             .collect();
+        if let Some(p) = &mut profiler {
+            p.end_call(StageKind::GroupSteps);
+        }
+        self.profiler = profiler;
         self.dist.distributable_s += self.clock.leave();
         replies
     }
@@ -123,12 +175,9 @@ impl Executor for Inline {
     ) -> Vec<PreparedPairs> {
         self.clock.enter();
         let clock = Instant::now();
-        let prepared: Vec<PreparedPairs> = inputs
-            .iter()
-            .map(|input| {
-                group::prepare_pairs(st, input, (0, input.pair_count()), &mut Inline::default())
-            })
-            .collect();
+        let prepared = self.each(StageKind::PreparePairs, &inputs, |input| {
+            group::prepare_pairs(st, input, (0, input.pair_count()), &mut Inline::default())
+        });
         self.narrowphase_tasks += prepared.iter().map(PreparedPairs::tasks).sum::<u64>();
         self.busy_s += clock.elapsed().as_secs_f64();
         self.dist.distributable_s += self.clock.leave();
@@ -145,7 +194,16 @@ impl Executor for Inline {
             speed: 1.0,
             ..Default::default()
         };
-        (vec![me], self.dist.clone())
+        let mut dist = self.dist.clone();
+        if let Some(p) = &mut self.profiler {
+            p.close(&mut dist);
+        }
+        (vec![me], dist)
+    }
+    fn groups_stepped(&mut self) {
+        if let Some(p) = &mut self.profiler {
+            p.end_step();
+        }
     }
 }
 

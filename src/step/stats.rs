@@ -262,6 +262,36 @@ pub struct Distribution {
     /// of max(the largest group, all the groups / R), where each group runs
     /// whole on one rank and every rank is as fast as this run's.
     pub group_speedup_bound: Vec<RankBound>,
+    /// The whole step on R ranks, for R in `BOUND_RANKS`, predicted from
+    /// this run's measured tasks and bytes over `prediction_link` with the
+    /// scheduler's rules (`cluster::predict`). Only a one-rank run
+    /// predicts (it measures every task); empty on several ranks.
+    #[serde(default)]
+    pub predicted: Vec<PredictedRanks>,
+    /// The link the prediction assumed (`--link-latency-us`,
+    /// `--link-bytes-per-s`).
+    #[serde(default)]
+    pub prediction_link: Option<PredictionLink>,
+}
+
+/// One entry of `Distribution::predicted`.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct PredictedRanks {
+    pub ranks: u32,
+    /// This run's wall seconds over `wall_s`.
+    pub speedup: f64,
+    /// The run's steps, predicted on `ranks` ranks.
+    pub wall_s: f64,
+    /// The longest step so predicted.
+    pub worst_step_s: f64,
+}
+
+/// The link `Distribution::predicted` assumed between rank 0 and each worker.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
+pub struct PredictionLink {
+    /// One way (half a round trip).
+    pub latency_s: f64,
+    pub bytes_per_s: f64,
 }
 
 /// One entry of `Distribution::group_speedup_bound`.

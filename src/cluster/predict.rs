@@ -1,0 +1,312 @@
+//! The speed-up a lab can expect: a one-rank run's steps
+//! (`step::profile`), each stage call's measured tasks replayed on N ranks
+//! with the scheduler's own rules, over a link given as parameters. Pure:
+//! no MPI, so a one-rank run predicts what the cluster would do with it.
+//!
+//! A step on N ranks takes rank 0's own seconds (everything outside the
+//! distributable stages, as measured) plus, for each stage call, the
+//! faster of running it on rank 0 alone and sharing it out: the
+//! self-scheduled stages (island solves, group steps, the first stage of
+//! large groups) as `scatter.rs` hands out chunks, the narrowphase by the
+//! greedy plan (`schedule::assign`). Every message crosses rank 0's one
+//! link, one after another (`schedule::Link`). Groups count whole, as
+//! `--whole-groups` runs them: splitting a pile is not predicted.
+
+use super::scatter::{CHUNK_SHARE, COORDINATOR_SHARE};
+use super::schedule;
+use crate::step::profile::{StageCall, StageKind, StepProfile, StepSink, TaskCost};
+use crate::step::stats::{BOUND_RANKS, Distribution, PredictedRanks, PredictionLink};
+
+/// The link the prediction assumes between rank 0 and each worker.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkModel {
+    /// One way, seconds: half a round trip.
+    pub latency_s: f64,
+    pub bytes_per_s: f64,
+}
+
+impl LinkModel {
+    /// A lab's 100 Mbit/s switched network as `scripts/lab.sh` measured it
+    /// (`bench/results/vm-2cpu/network.md`, 2 PCs): 1.1 ms round trips and
+    /// 7.7 MB/s of MPI payload.
+    pub const LAB_100_MBIT: LinkModel = LinkModel {
+        latency_s: 550e-6,
+        bytes_per_s: 7.7e6,
+    };
+}
+
+/// Replays each step on `BOUND_RANKS` ranks (`StepSink`).
+pub struct Prediction {
+    link: LinkModel,
+    one_rank_s: f64,
+    predicted_s: [f64; BOUND_RANKS.len()],
+    worst_step_s: [f64; BOUND_RANKS.len()],
+}
+
+impl Prediction {
+    pub fn new(link: LinkModel) -> Self {
+        Prediction {
+            link,
+            one_rank_s: 0.0,
+            predicted_s: [0.0; BOUND_RANKS.len()],
+            worst_step_s: [0.0; BOUND_RANKS.len()],
+        }
+    }
+}
+
+impl StepSink for Prediction {
+    fn step(&mut self, profile: &StepProfile) {
+        let own = (profile.wall_s - profile.stage_seconds()).max(0.0);
+        self.one_rank_s += profile.wall_s;
+        for (i, &ranks) in BOUND_RANKS.iter().enumerate() {
+            let step_s = own
+                + profile
+                    .stages
+                    .iter()
+                    .map(|call| stage_s(call, ranks as usize, &self.link))
+                    .sum::<f64>();
+            self.predicted_s[i] += step_s;
+            self.worst_step_s[i] = self.worst_step_s[i].max(step_s);
+        }
+    }
+
+    fn close(&mut self, distribution: &mut Distribution) {
+        distribution.prediction_link = Some(PredictionLink {
+            latency_s: self.link.latency_s,
+            bytes_per_s: self.link.bytes_per_s,
+        });
+        distribution.predicted = BOUND_RANKS
+            .iter()
+            .enumerate()
+            .map(|(i, &ranks)| PredictedRanks {
+                ranks,
+                wall_s: self.predicted_s[i],
+                speedup: if self.predicted_s[i] > 0.0 {
+                    self.one_rank_s / self.predicted_s[i]
+                } else {
+                    1.0
+                },
+                worst_step_s: self.worst_step_s[i],
+            })
+            .collect();
+    }
+}
+
+/// Seconds one stage call takes on up to `ranks` ranks: alone, or shared
+/// with as many workers as is fastest (the scheduler chooses how many,
+/// `schedule::workers_to_use_over_link`, and keeps a stage home where
+/// none pays).
+pub fn stage_s(call: &StageCall, ranks: usize, link: &LinkModel) -> f64 {
+    let alone: f64 = call.tasks.iter().map(|t| t.seconds).sum();
+    if call.tasks.len() < 2 {
+        return alone;
+    }
+    (2..=ranks)
+        .map(|r| match call.kind {
+            StageKind::Narrowphase => planned_s(&call.tasks, r, link),
+            StageKind::IslandSolves | StageKind::GroupSteps | StageKind::PreparePairs => {
+                self_scheduled_s(&call.tasks, r, link)
+            }
+        })
+        .fold(alone, f64::min)
+}
+
+/// Rank 0's link, which carries one message at a time.
+struct SharedLink<'l> {
+    model: &'l LinkModel,
+    free_at: f64,
+}
+
+impl SharedLink<'_> {
+    /// A request of `bytes` (its answer's bytes counted with it) posted at
+    /// `t`: when the worker has it.
+    fn send(&mut self, t: f64, bytes: u64) -> f64 {
+        let start = t.max(self.free_at);
+        self.free_at = start + bytes as f64 / self.model.bytes_per_s;
+        self.free_at + self.model.latency_s
+    }
+}
+
+/// Self-scheduling (`scatter.rs`): the tasks largest first; rank 0 takes
+/// one at a time from the back, each worker a chunk from the front of at
+/// least `CHUNK_SHARE` of its share of what is left, the next chunk one
+/// round trip after it answers. Every rank as fast as this one.
+fn self_scheduled_s(tasks: &[TaskCost], ranks: usize, link: &LinkModel) -> f64 {
+    let order = largest_first(tasks);
+    let (mut front, mut back) = (0, order.len());
+    let mut left: f64 = tasks.iter().map(|t| t.seconds).sum();
+    let mut rank0 = 0.0_f64;
+    let mut worker_free = vec![0.0_f64; ranks - 1];
+    let mut shared = SharedLink {
+        model: link,
+        free_at: 0.0,
+    };
+    let mut answered = 0.0_f64;
+    while front < back {
+        let (w, t) = worker_free
+            .iter()
+            .copied()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .expect("at least one worker");
+        if rank0 <= t {
+            back -= 1;
+            let cost = tasks[order[back]].seconds;
+            rank0 += cost;
+            left -= cost;
+            continue;
+        }
+        let want = CHUNK_SHARE * left / ranks as f64;
+        let (mut cost, mut bytes) = (0.0, 0);
+        while front < back && (cost == 0.0 || cost < want) {
+            cost += tasks[order[front]].seconds;
+            bytes += tasks[order[front]].bytes;
+            front += 1;
+        }
+        left -= cost;
+        let done = shared.send(t, bytes) + cost;
+        answered = answered.max(done + link.latency_s);
+        worker_free[w] = done + 2.0 * link.latency_s;
+    }
+    rank0.max(answered)
+}
+
+/// The greedy plan (`schedule::assign`): one message per worker, rank 0
+/// planned at `COORDINATOR_SHARE` of its speed.
+fn planned_s(tasks: &[TaskCost], ranks: usize, link: &LinkModel) -> f64 {
+    let costs: Vec<f64> = tasks.iter().map(|t| t.seconds).collect();
+    let slot = schedule::assign(&costs, &vec![1.0; ranks], COORDINATOR_SHARE);
+    let mut load = vec![0.0; ranks];
+    let mut bytes = vec![0u64; ranks];
+    for (task, &r) in tasks.iter().zip(&slot) {
+        load[r] += task.seconds;
+        bytes[r] += task.bytes;
+    }
+    let mut shared = SharedLink {
+        model: link,
+        free_at: 0.0,
+    };
+    (1..ranks)
+        .filter(|&r| bytes[r] > 0)
+        .map(|r| shared.send(0.0, bytes[r]) + load[r] + link.latency_s)
+        .fold(load[0], f64::max)
+}
+
+/// Task indices by decreasing seconds, ties by index.
+fn largest_first(tasks: &[TaskCost]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..tasks.len()).collect();
+    order.sort_by(|&i, &j| {
+        tasks[j]
+            .seconds
+            .total_cmp(&tasks[i].seconds)
+            .then(i.cmp(&j))
+    });
+    order
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tasks(seconds: &[f64], bytes: u64) -> Vec<TaskCost> {
+        seconds
+            .iter()
+            .map(|&seconds| TaskCost { seconds, bytes })
+            .collect()
+    }
+
+    const FREE: LinkModel = LinkModel {
+        latency_s: 0.0,
+        bytes_per_s: f64::INFINITY,
+    };
+
+    /// Equal tasks over a free link: N ranks take 1/N of the time, to
+    /// the rounding of whole tasks.
+    #[test]
+    fn equal_tasks_on_a_free_link_divide_by_the_ranks() {
+        let call = StageCall {
+            kind: StageKind::GroupSteps,
+            tasks: tasks(&[1e-3; 64], 1000),
+        };
+        for ranks in [2, 4, 8] {
+            let s = stage_s(&call, ranks, &FREE);
+            let ideal = 64e-3 / ranks as f64;
+            assert!(
+                s >= ideal - 1e-12 && s <= ideal + 1e-3,
+                "{ranks} ranks: {s}"
+            );
+        }
+    }
+
+    /// One task that is 95 % of the work bounds any number of ranks.
+    #[test]
+    fn the_largest_task_bounds_the_stage() {
+        let mut seconds = vec![95e-3];
+        seconds.extend([1e-3; 5]);
+        let call = StageCall {
+            kind: StageKind::GroupSteps,
+            tasks: tasks(&seconds, 1000),
+        };
+        let s = stage_s(&call, 16, &FREE);
+        assert!((s - 95e-3).abs() < 1e-12, "{s}");
+    }
+
+    /// Over a slow link the bytes outweigh the work, and the stage stays
+    /// on rank 0: never slower than alone.
+    #[test]
+    fn a_stage_whose_bytes_outweigh_it_stays_home() {
+        let call = StageCall {
+            kind: StageKind::IslandSolves,
+            tasks: tasks(&[1e-5; 10], 100_000),
+        };
+        let slow = LinkModel {
+            latency_s: 1e-3,
+            bytes_per_s: 1e6,
+        };
+        let alone: f64 = call.tasks.iter().map(|t| t.seconds).sum();
+        assert_eq!(stage_s(&call, 4, &slow), alone);
+        let planned = StageCall {
+            kind: StageKind::Narrowphase,
+            ..call
+        };
+        assert_eq!(stage_s(&planned, 4, &slow), alone);
+    }
+
+    /// The link carries one message at a time: four workers' chunks of
+    /// 1 MB over 1 MB/s take at least 4 s to send, whatever the work.
+    #[test]
+    fn the_shared_link_serialises_the_messages() {
+        let call = StageCall {
+            kind: StageKind::GroupSteps,
+            tasks: tasks(&[10.0; 8], 1_000_000),
+        };
+        let link = LinkModel {
+            latency_s: 0.0,
+            bytes_per_s: 1e6,
+        };
+        let s = stage_s(&call, 5, &link);
+        // Alone: 80 s. Rank 0 and the workers share it, each worker's
+        // chunk waiting for the ones sent before.
+        assert!(s > 80.0 / 5.0 && s < 80.0, "{s}");
+    }
+
+    /// A whole step: rank 0's own seconds stay, the stages shrink.
+    #[test]
+    fn a_step_keeps_rank_0s_own_seconds() {
+        let mut p = Prediction::new(FREE);
+        p.step(&StepProfile {
+            wall_s: 0.1,
+            stages: vec![StageCall {
+                kind: StageKind::GroupSteps,
+                tasks: tasks(&[10e-3; 8], 10),
+            }],
+        });
+        let mut d = Distribution::default();
+        p.close(&mut d);
+        let two = &d.predicted[0];
+        assert_eq!(two.ranks, 2);
+        // 20 ms of rank 0's own, 80 ms of groups halved.
+        assert!((two.wall_s - 0.06).abs() < 1e-12, "{}", two.wall_s);
+        assert!((two.speedup - 0.1 / 0.06).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,131 @@
+//! What a one-rank run's distributable work costs, step by step: each
+//! outermost stage call's tasks with their measured seconds and the bytes
+//! their messages would carry, and the wall time of the step around them.
+//! A `StepSink` (`cluster::predict`) turns it into the speed-up N ranks
+//! would give; the step itself never reads it.
+
+use super::stats::Distribution;
+use serde::Serialize;
+use std::time::Instant;
+
+/// The distributable stages, as `Executor`'s methods name them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StageKind {
+    Narrowphase,
+    IslandSolves,
+    GroupSteps,
+    PreparePairs,
+}
+
+/// One task of a stage call, as it ran here.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TaskCost {
+    pub seconds: f64,
+    /// Its request and its answer, encoded as the cluster sends them.
+    pub bytes: u64,
+}
+
+/// One outermost call of a distributable stage.
+#[derive(Clone, Debug)]
+pub struct StageCall {
+    pub kind: StageKind,
+    pub tasks: Vec<TaskCost>,
+}
+
+/// One step: its wall seconds on this rank and the stage calls within.
+/// What is not in a stage call is rank 0's own (integration, broadphase,
+/// planning, merging, the leak check, the outputs).
+#[derive(Clone, Debug, Default)]
+pub struct StepProfile {
+    pub wall_s: f64,
+    pub stages: Vec<StageCall>,
+}
+
+impl StepProfile {
+    /// Seconds of the step's stage calls.
+    pub fn stage_seconds(&self) -> f64 {
+        self.stages
+            .iter()
+            .flat_map(|c| &c.tasks)
+            .map(|t| t.seconds)
+            .sum()
+    }
+}
+
+/// Takes each step's profile as it ends, and writes what it made of them
+/// into the run's `Distribution` at the end.
+pub trait StepSink {
+    fn step(&mut self, profile: &StepProfile);
+    fn close(&mut self, distribution: &mut Distribution);
+}
+
+/// Records the stage calls of `Inline` between step boundaries
+/// (`Executor::groups_stepped`, once a step).
+pub struct Profiler {
+    sink: Box<dyn StepSink>,
+    step: StepProfile,
+    step_started: Instant,
+    call: Vec<TaskCost>,
+}
+
+impl Profiler {
+    pub fn new(sink: Box<dyn StepSink>) -> Self {
+        Profiler {
+            sink,
+            step: StepProfile::default(),
+            step_started: Instant::now(),
+            call: Vec::new(),
+        }
+    }
+
+    /// Adds a task of the call under way: its seconds since `started`,
+    /// its request and its answer.
+    pub(crate) fn task<T: Serialize, R: Serialize>(
+        &mut self,
+        started: Instant,
+        request: &T,
+        answer: &R,
+    ) {
+        self.task_of(started, wire_bytes(request) + wire_bytes(answer));
+    }
+
+    /// Adds a task of the call under way that took `bytes` of messages.
+    pub(crate) fn task_of(&mut self, started: Instant, bytes: u64) {
+        self.call.push(TaskCost {
+            seconds: started.elapsed().as_secs_f64(),
+            bytes,
+        });
+    }
+
+    /// Ends the call under way.
+    pub(crate) fn end_call(&mut self, kind: StageKind) {
+        let tasks = std::mem::take(&mut self.call);
+        self.step.stages.push(StageCall { kind, tasks });
+    }
+
+    /// Ends the step under way and starts the next.
+    pub(crate) fn end_step(&mut self) {
+        let now = Instant::now();
+        self.step.wall_s = (now - self.step_started).as_secs_f64();
+        self.step_started = now;
+        self.sink.step(&self.step);
+        self.step.stages.clear();
+    }
+
+    /// The run is over: what is left of its last step counts, and the
+    /// sink writes its figures.
+    pub(crate) fn close(&mut self, distribution: &mut Distribution) {
+        self.end_step();
+        self.sink.close(distribution);
+    }
+}
+
+/// Bytes `value` takes in the cluster's messages (bincode, standard
+/// configuration, as `cluster::protocol::encode`), counted without
+/// writing them.
+pub fn wire_bytes<T: Serialize>(value: &T) -> u64 {
+    let mut size = bincode::enc::write::SizeWriter::default();
+    bincode::serde::encode_into_writer(value, &mut size, bincode::config::standard())
+        .expect("counting encoded bytes cannot fail");
+    size.bytes_written as u64
+}
