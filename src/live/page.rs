@@ -10,15 +10,12 @@ const BUNDLE: &str = include_str!("../../viewer/dist/live.js");
 
 /// The whole page for the scene `scene_name`.
 pub fn html(scene_name: &str) -> String {
-    let capacity = TEMPLATE.len() + BUNDLE.len();
-    fill_template(TEMPLATE, "viewer/src/live.html", capacity, |key, out| {
-        match key {
-            "TITLE" => out.push_str(&html_escape(scene_name)),
-            "SCRIPT" => out.push_str(BUNDLE),
-            _ => return false,
-        }
-        true
-    })
+    let title = html_escape(scene_name);
+    fill_template(
+        TEMPLATE,
+        "viewer/src/live.html",
+        &[("TITLE", &title), ("SCRIPT", BUNDLE)],
+    )
 }
 
 #[cfg(test)]

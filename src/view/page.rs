@@ -23,16 +23,12 @@ pub(crate) fn html_escape(text: &str) -> String {
 }
 
 /// `template` (the file `name`, for the panic) with each `{{KEY}}` replaced
-/// by the text `fill` gives for `KEY`. Placeholders are replaced in one pass
-/// over the template, so nothing substituted (a scene name, a bundle) is
-/// searched for placeholders. `capacity`: the page's expected length.
-pub(crate) fn fill_template(
-    template: &str,
-    name: &str,
-    capacity: usize,
-    mut fill: impl FnMut(&str, &mut String) -> bool,
-) -> String {
-    let mut out = String::with_capacity(capacity);
+/// by `KEY`'s text in `values`. Placeholders are replaced in one pass over
+/// the template, so nothing substituted (a scene name, a bundle) is
+/// searched for placeholders.
+pub(crate) fn fill_template(template: &str, name: &str, values: &[(&str, &str)]) -> String {
+    let filled: usize = values.iter().map(|(_, text)| text.len()).sum();
+    let mut out = String::with_capacity(template.len() + filled);
     let mut rest = template;
     while let Some(start) = rest.find("{{") {
         let end = start
@@ -41,8 +37,9 @@ pub(crate) fn fill_template(
                 .expect("template placeholders are closed");
         out.push_str(&rest[..start]);
         let key = &rest[start + 2..end];
-        if !fill(key, &mut out) {
-            panic!("unknown placeholder {key} in {name}");
+        match values.iter().find(|(k, _)| *k == key) {
+            Some((_, text)) => out.push_str(text),
+            None => panic!("unknown placeholder {key} in {name}"),
         }
         rest = &rest[end + 2..];
     }
@@ -54,17 +51,16 @@ pub(crate) fn fill_template(
 pub fn html(scene_name: &str, data: &ReplayData) -> String {
     let header = serde_json::to_string(&data.header).expect("the header is plain data");
     let base64 = base64::engine::general_purpose::STANDARD.encode(&data.binary);
-    let capacity = TEMPLATE.len() + BUNDLE.len() + header.len() + base64.len();
-    fill_template(TEMPLATE, "viewer/src/replay.html", capacity, |key, out| {
-        match key {
-            "TITLE" => out.push_str(&html_escape(scene_name)),
-            "HEADER" => out.push_str(&json_in_script(&header)),
-            "DATA" => out.push_str(&base64),
-            "SCRIPT" => out.push_str(BUNDLE),
-            _ => return false,
-        }
-        true
-    })
+    fill_template(
+        TEMPLATE,
+        "viewer/src/replay.html",
+        &[
+            ("TITLE", &html_escape(scene_name)),
+            ("HEADER", &json_in_script(&header)),
+            ("DATA", &base64),
+            ("SCRIPT", BUNDLE),
+        ],
+    )
 }
 
 #[cfg(test)]
