@@ -381,7 +381,10 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         out.busy_s = clock.elapsed().as_secs_f64() + prepared_s;
         out
     });
-    GroupReply(Some(output.map_err(GroupFailure::from)), region.captured)
+    GroupReply(
+        Some(output.map_err(GroupFailure::from)),
+        region.gathered.captured,
+    )
 }
 
 /// Where a group's realised paths met what it did not hold.

@@ -806,7 +806,7 @@ impl EventLoop {
             results,
             warm: take(g.warm).into_iter().collect(),
             impacts: take(g.impacts),
-            pair_forces: take(&mut g.pair_forces).into_iter().collect(),
+            pair_forces: take(&mut g.gathered.pair_forces).into_iter().collect(),
             counters: take(g.counters),
             stage: take(g.stage),
             events: self.events as u64,

@@ -60,7 +60,7 @@ use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
-use region::Region;
+use region::{Gathered, Region};
 use stats::{Distribution, GroupWork, RankSummary};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
@@ -318,11 +318,8 @@ impl World {
             impacts: &mut s.impacts,
             counters: &mut d.counters,
             stage: &mut d.stage,
-            pair_forces: BTreeMap::new(),
-            speculative_pushes: BTreeSet::new(),
-            integrated: Default::default(),
             keep_answers: false,
-            captured: Vec::new(),
+            gathered: Gathered::default(),
         };
         let result = frame::step_world(
             &mut world,
@@ -333,11 +330,11 @@ impl World {
             &mut s.steps,
             &mut d.group_work,
         );
-        let Region {
+        let Gathered {
             pair_forces,
             captured,
             ..
-        } = world;
+        } = world.gathered;
         d.captured_islands = captured;
         d.last_normal_force_sum = pair_forces.values().sum();
         d.last_pair_forces = pair_forces
