@@ -53,7 +53,7 @@ pub(crate) struct PairAsk<'q> {
 
 impl PairAsk<'_> {
     /// The stretch from where both bodies' segments start to `h`.
-    fn from_segments_to(&self, h: f64) -> (f64, f64) {
+    fn stretch_to(&self, h: f64) -> (f64, f64) {
         let (a, b) = (self.k.0 as usize, self.k.1 as usize);
         (self.seg[a].time.max(self.seg[b].time), h)
     }
@@ -150,7 +150,7 @@ impl Region<'_> {
     /// Time of impact of one pair in this step, if it overlaps (or a fast
     /// pair crossed) beyond what it carried into its segment.
     pub(crate) fn time_of_impact(&mut self, q: PairAsk, h: f64) -> Option<f64> {
-        self.time_of_impact_within(q, q.from_segments_to(h))
+        self.time_of_impact_within(q, q.stretch_to(h))
     }
 
     /// Time of impact of one pair between `lo` and `hi` (both bodies on
@@ -202,7 +202,7 @@ impl Region<'_> {
         if self.keep_answers {
             return Search::Found(self.time_of_impact(q, h));
         }
-        self.begin_search(q, q.from_segments_to(h))
+        self.begin_search(q, q.stretch_to(h))
     }
 
     /// The search's set-up: the bounds its samples are spaced by, and the
