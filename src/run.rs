@@ -164,33 +164,12 @@ pub enum RunError {
     Failed(String),
 }
 
-/// Runs the frame loop on the coordinator and writes every output. With
+/// Runs the frame loop on the coordinator and writes every output, with
+/// `driver` acting between the steps (`Unattended` for a plain run). With
 /// `resume`, the run continues from that checkpoint (already checked against
 /// the scene by `Checkpoint::read_for`) and the trajectory in `out_dir`, if
 /// any, is continued from the checkpoint's time. `hosts` names each rank's
-/// host (by rank) for `summary.json`'s `per_rank`.
-pub fn run_coordinator(
-    scene: Scene,
-    opts: &RunOptions,
-    out_dir: &Path,
-    exec: &mut dyn Executor,
-    frames: &mut dyn FrameSink,
-    resume: Option<Checkpoint>,
-    hosts: &[RankHost],
-) -> Result<Summary, RunError> {
-    run_driven(
-        scene,
-        opts,
-        out_dir,
-        exec,
-        frames,
-        resume,
-        hosts,
-        &mut Unattended,
-    )
-}
-
-/// `run_coordinator` with a `Driver` acting between the steps. A signal
+/// host (by rank) for `summary.json`'s `per_rank`. A signal
 /// (`crate::interrupt`) ends the run at the next step boundary with
 /// `end_reason = "interrupted"`.
 #[allow(clippy::too_many_arguments)]

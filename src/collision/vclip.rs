@@ -544,39 +544,19 @@ fn edge_against_edge_region(
         let g = u.dot(&(s - t - dir * along));
         if g.abs() <= flat { 0.0 } else { g }
     };
-    let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    let (mut lo_k, mut hi_k) = (None, None);
+    let mut c = Clip::whole();
     for (k, plane) in planes.iter().enumerate().take(2) {
-        let (d0, d1) = (
-            snap(plane.signed_distance(s0), noise),
-            snap(plane.signed_distance(s1), noise),
-        );
-        if d0 < 0.0 && d1 < 0.0 {
+        if c.cut(k, plane, s0, s1, noise) {
             return Some(edge_neighbor(k, plane));
         }
-        if d0 < 0.0 {
-            let l = d0 / (d0 - d1);
-            if l > lo {
-                (lo, lo_k) = (l, Some(k));
-            }
-        } else if d1 < 0.0 {
-            let l = d0 / (d0 - d1);
-            if l < hi {
-                (hi, hi_k) = (l, Some(k));
-            }
-        }
     }
-    let (vlo, vhi, vlo_k, vhi_k) = (lo, hi, lo_k, hi_k);
-    let mut compound = lo > hi;
+    let (vlo, vhi, vlo_k, vhi_k) = (c.lo, c.hi, c.lo_plane, c.hi_plane);
+    let mut compound = c.lo > c.hi;
     for (k, plane) in planes.iter().enumerate().skip(2) {
         if compound {
             break;
         }
-        let (d0, d1) = (
-            snap(plane.signed_distance(s0), noise),
-            snap(plane.signed_distance(s1), noise),
-        );
-        if d0 < 0.0 && d1 < 0.0 {
+        if c.cut(k, plane, s0, s1, noise) {
             // The segment is wholly on the face's side, yet its nearest point
             // may be an end vertex of e (where the face's angle can be acute,
             // so moving into the face need not help). Vertices win.
@@ -592,19 +572,15 @@ fn edge_against_edge_region(
             }
             return Some(edge_neighbor(k, plane));
         }
-        if d0 < 0.0 {
-            let l = d0 / (d0 - d1);
-            if l > lo {
-                (lo, lo_k) = (l, Some(k));
-            }
-        } else if d1 < 0.0 {
-            let l = d0 / (d0 - d1);
-            if l < hi {
-                (hi, hi_k) = (l, Some(k));
-            }
-        }
-        compound = lo > hi;
+        compound = c.lo > c.hi;
     }
+    let Clip {
+        lo,
+        hi,
+        lo_plane: lo_k,
+        hi_plane: hi_k,
+        ..
+    } = c;
     if compound {
         // The segment misses VR(e), entering the plane of N_hi's region
         // before leaving N_lo's. Convexity of D puts its minimum on the side
@@ -756,35 +732,58 @@ struct Clip {
     excluded_by: Option<usize>,
 }
 
-fn clip(planes: &[VoronoiPlane], s0: &Vector3<f64>, s1: &Vector3<f64>, noise: f64) -> Clip {
-    let mut c = Clip {
-        lo: 0.0,
-        hi: 1.0,
-        lo_plane: None,
-        hi_plane: None,
-        excluded_by: None,
-    };
-    for (k, plane) in planes.iter().enumerate() {
+impl Clip {
+    /// The whole segment, `[0, 1]`, before any plane.
+    fn whole() -> Clip {
+        Clip {
+            lo: 0.0,
+            hi: 1.0,
+            lo_plane: None,
+            hi_plane: None,
+            excluded_by: None,
+        }
+    }
+
+    /// Narrows `[lo, hi]` to the side of plane `k` with signed distance
+    /// ≥ 0 (distances within `noise` of zero `snap` to it). True where both
+    /// ends lie behind the plane (simple exclusion, noted in `excluded_by`),
+    /// leaving `[lo, hi]` as it was.
+    fn cut(
+        &mut self,
+        k: usize,
+        plane: &VoronoiPlane,
+        s0: &Vector3<f64>,
+        s1: &Vector3<f64>,
+        noise: f64,
+    ) -> bool {
         let (d0, d1) = (
             snap(plane.signed_distance(s0), noise),
             snap(plane.signed_distance(s1), noise),
         );
         if d0 < 0.0 && d1 < 0.0 {
-            c.excluded_by = Some(k);
-            return c;
+            self.excluded_by = Some(k);
+            return true;
         }
         if d0 < 0.0 {
             let l = d0 / (d0 - d1);
-            if l > c.lo {
-                c.lo = l;
-                c.lo_plane = Some(k);
+            if l > self.lo {
+                (self.lo, self.lo_plane) = (l, Some(k));
             }
         } else if d1 < 0.0 {
             let l = d0 / (d0 - d1);
-            if l < c.hi {
-                c.hi = l;
-                c.hi_plane = Some(k);
+            if l < self.hi {
+                (self.hi, self.hi_plane) = (l, Some(k));
             }
+        }
+        false
+    }
+}
+
+fn clip(planes: &[VoronoiPlane], s0: &Vector3<f64>, s1: &Vector3<f64>, noise: f64) -> Clip {
+    let mut c = Clip::whole();
+    for (k, plane) in planes.iter().enumerate() {
+        if c.cut(k, plane, s0, s1, noise) {
+            return c;
         }
         if c.lo > c.hi {
             return c;

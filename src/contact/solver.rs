@@ -384,23 +384,18 @@ mod tests {
     use crate::body::BodyId;
     use crate::contact::lcp;
     use crate::contact::methods::dantzig::RowFactorsOf;
-    use crate::contact::task::fixed_body;
+    use crate::contact::task::{fixed_body, stacked_cube};
     use nalgebra::Matrix3;
 
     /// A fixed floor and `n` 1 kg unit bodies stacked on it under gravity
     /// over a 0.01 s step, the top one moving along x at `slide` m/s.
     fn stacked_bodies(n: usize, slide: f64) -> Vec<IslandBody> {
-        let floor = fixed_body(Vector3::zeros());
-        let mut bodies = vec![floor.clone()];
+        let mut bodies = vec![fixed_body(Vector3::zeros())];
         for k in 1..=n {
+            let velocity = Vector3::new(if k == n { slide } else { 0.0 }, 0.0, 0.0);
             bodies.push(IslandBody {
-                id: BodyId(k as u32),
-                inv_mass: 1.0,
-                inv_inertia: Matrix3::identity() * 6.0,
-                position: Vector3::new(0.0, 0.0, k as f64 - 0.5),
-                velocity: Vector3::new(if k == n { slide } else { 0.0 }, 0.0, 0.0),
                 external_dv: Vector3::new(0.0, 0.0, -9.81 * 0.01),
-                ..floor.clone()
+                ..stacked_cube(k, velocity)
             });
         }
         bodies

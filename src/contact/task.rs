@@ -229,3 +229,17 @@ pub(super) fn fixed_body(position: Vector3<f64>) -> IslandBody {
         external_dw: Vector3::zeros(),
     }
 }
+
+/// Body `k` (from 1) of a stack of 1 kg unit cubes on a fixed floor at the
+/// origin (`fixed_body`): centred at z = k − ½, moving at `velocity`.
+#[cfg(test)]
+pub(super) fn stacked_cube(k: usize, velocity: Vector3<f64>) -> IslandBody {
+    IslandBody {
+        id: BodyId(k as u32),
+        inv_mass: 1.0,
+        inv_inertia: Matrix3::identity() * 6.0,
+        position: Vector3::new(0.0, 0.0, k as f64 - 0.5),
+        velocity,
+        ..fixed_body(Vector3::zeros())
+    }
+}

@@ -25,7 +25,7 @@ pub mod replay;
 pub mod server;
 
 use crate::view::mesh::triangulate;
-use crate::view::replay_data::{Camera, Floor, floor};
+use crate::view::replay_data::{Camera, Floor, body_columns, camera, fall_z, floor};
 use rigidsim::scene::Scene;
 use serde::Serialize;
 
@@ -72,6 +72,7 @@ struct HandMessage {
 /// The `scene` message of `scene`, as JSON text.
 pub fn scene_message(scene: &Scene) -> String {
     let settings = &scene.settings;
+    let (body_object, body_kind, body_mass) = body_columns(scene);
     let message = SceneMessage {
         kind: "scene",
         scene: &scene.name,
@@ -79,14 +80,8 @@ pub fn scene_message(scene: &Scene) -> String {
         dt: settings.dt,
         frame_interval_s: settings.frame_interval,
         gravity: settings.gravity.into(),
-        fall_z: settings.fall_z.is_finite().then_some(settings.fall_z),
-        camera: settings.render.as_ref().and_then(|r| {
-            Some(Camera {
-                eye: r.eye?.into(),
-                target: r.target?.into(),
-                fov_y_deg: r.fov_y_deg,
-            })
-        }),
+        fall_z: fall_z(settings),
+        camera: camera(settings),
         floor: floor(scene),
         objects: scene
             .objects
@@ -101,17 +96,9 @@ pub fn scene_message(scene: &Scene) -> String {
                 }
             })
             .collect(),
-        body_object: scene.bodies.iter().map(|b| b.object.0 as usize).collect(),
-        body_kind: scene
-            .bodies
-            .iter()
-            .map(|b| protocol::kind_name(&b.kind))
-            .collect(),
-        body_mass: scene
-            .bodies
-            .iter()
-            .map(|b| scene.objects[b.object.0 as usize].mass)
-            .collect(),
+        body_object,
+        body_kind,
+        body_mass,
         hand: HandMessage {
             frequency: hand::frequency(settings.dt),
             max_acceleration: hand::HAND_MAX_ACCELERATION,

@@ -3,35 +3,19 @@
 //! built by `viewer/build.mjs`) written into it. Both are compiled into the
 //! binary; the page gets everything else over its WebSocket.
 
+use crate::view::page::{fill_template, html_escape};
+
 const TEMPLATE: &str = include_str!("../../viewer/src/live.html");
 const BUNDLE: &str = include_str!("../../viewer/dist/live.js");
 
-fn html_escape(text: &str) -> String {
-    text.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
 /// The whole page for the scene `scene_name`.
 pub fn html(scene_name: &str) -> String {
-    // One pass over the template: nothing substituted is searched again.
-    let mut out = String::with_capacity(TEMPLATE.len() + BUNDLE.len());
-    let mut rest = TEMPLATE;
-    while let Some(start) = rest.find("{{") {
-        let end = start
-            + rest[start..]
-                .find("}}")
-                .expect("template placeholders are closed");
-        out.push_str(&rest[..start]);
-        match &rest[start + 2..end] {
-            "TITLE" => out.push_str(&html_escape(scene_name)),
-            "SCRIPT" => out.push_str(BUNDLE),
-            other => panic!("unknown placeholder {other} in viewer/src/live.html"),
-        }
-        rest = &rest[end + 2..];
-    }
-    out.push_str(rest);
-    out
+    let title = html_escape(scene_name);
+    fill_template(
+        TEMPLATE,
+        "viewer/src/live.html",
+        &[("TITLE", &title), ("SCRIPT", BUNDLE)],
+    )
 }
 
 #[cfg(test)]

@@ -9,8 +9,8 @@
 //! `pause`, `resume`, `reset`, `stop`: inputs, each taking effect at the
 //! next step boundary and written with its step to `inputs.jsonl`.
 
+use crate::view::replay_data::kind_name;
 use nalgebra::Vector3;
-use rigidsim::body::BodyKind;
 use rigidsim::scene::Scene;
 use rigidsim::scene::bounds;
 use serde::{Deserialize, Serialize};
@@ -199,14 +199,6 @@ impl SceneFacts {
             ));
         }
         Ok(b)
-    }
-}
-
-pub fn kind_name(kind: &BodyKind) -> &'static str {
-    match kind {
-        BodyKind::Dynamic => "dynamic",
-        BodyKind::Fixed => "fixed",
-        BodyKind::Driven { .. } => "driven",
     }
 }
 

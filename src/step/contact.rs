@@ -173,7 +173,7 @@ impl Region<'_> {
         // Kept for the caller to write (`--capture-islands`), in no stage's time.
         if let Some(min_rows) = self.st.step_settings.capture_min_rows {
             let large = tasks.iter().filter(|t| t.rows() >= min_rows);
-            self.captured.extend(large.cloned());
+            self.gathered.captured.extend(large.cloned());
         }
 
         let timer = self.stage.start(Stage::SolveIslands);
@@ -399,7 +399,9 @@ impl Region<'_> {
                 self.warm.remove(pair);
             }
             let pushed = (0..near.len()).filter(|&k| near[k] && r.pushed.get(k) == Some(&true));
-            self.speculative_pushes.extend(pushed.map(|k| pairs[k].0));
+            self.gathered
+                .speculative_pushes
+                .extend(pushed.map(|k| pairs[k].0));
             for ((((pair, local), f), friction), approach) in pairs
                 .iter()
                 .zip(&r.contact_force)
@@ -415,7 +417,7 @@ impl Region<'_> {
                 });
             }
         }
-        self.pair_forces.extend(pair_forces);
+        self.gathered.pair_forces.extend(pair_forces);
     }
 
     /// Applies the islands' impulses to the segment start states of
@@ -486,7 +488,7 @@ impl Region<'_> {
     /// (`Counters::speculative_pushes`) and those of them that do not
     /// `touch` now (`speculative_ghosts`), and forgets them.
     pub(crate) fn count_speculative_ghosts(&mut self, touch: impl Fn(&(BodyId, BodyId)) -> bool) {
-        let pushes = std::mem::take(&mut self.speculative_pushes);
+        let pushes = std::mem::take(&mut self.gathered.speculative_pushes);
         self.counters.speculative_pushes += pushes.len() as u64;
         self.counters.speculative_ghosts += pushes.iter().filter(|p| !touch(p)).count() as u64;
     }

@@ -61,9 +61,9 @@ pub(super) fn step_world(
     };
     // What the groups' solves captured goes after the step-start solve's,
     // also when one of them fails.
-    let mut captured = std::mem::take(&mut w.captured);
+    let mut captured = std::mem::take(&mut w.gathered.captured);
     let done = group::step_groups(w.st, w, &start, exec, &mut captured);
-    w.captured = captured;
+    w.gathered.captured = captured;
     let done = done?;
     let runs = done.runs;
     work.body_cost = start.body_cost.clone();
@@ -133,7 +133,7 @@ fn segments(w: &Region) -> Vec<Segment> {
 /// contacts touching at the step's end; a group's own solves count theirs
 /// at the group's end (`impacts::step_group`).
 fn count_start_ghosts(w: &mut Region, touching: &[Touching]) {
-    if w.speculative_pushes.is_empty() {
+    if w.gathered.speculative_pushes.is_empty() {
         return;
     }
     let touches: BTreeSet<(BodyId, BodyId)> = touching
@@ -273,7 +273,7 @@ fn merge_groups(w: &mut Region, runs: Vec<GroupOutput>, reruns: u64) -> Merged {
                 .into_iter()
                 .map(|t| group::to_world_touching(ids, t)),
         );
-        w.pair_forces.extend(
+        w.gathered.pair_forces.extend(
             g.pair_forces
                 .into_iter()
                 .map(|((a, b), f)| ((BodyId(ids[a.index()]), BodyId(ids[b.index()])), f)),

@@ -33,7 +33,7 @@ use super::impacts::{GroupState, step_group};
 use super::region::{PairMap, Region, RegionState};
 use super::stats::{Counters, NumericalFailure};
 use super::timers::{Stage, StageSeconds};
-use super::toi::SolvedSince;
+use super::toi::{PairAsk, SolvedSince};
 use super::touching::{Touching, WarmContact};
 use crate::body::{Activity, BodyId, BodyState};
 use crate::collision::broadphase::{self, SphereProxy};
@@ -309,11 +309,11 @@ pub fn prepare_pairs(
     let since: SolvedSince = input.since.iter().cloned().collect();
     let results = g.narrowphase_skipping_separating(exec, pairs, &input.end, &separating);
     let timer = g.stage.start(Stage::TimeOfImpact);
-    let h = st.settings.dt;
+    let (h, seg, since) = (st.settings.dt, &input.seg, &since);
     let toi = pairs
         .iter()
         .zip(&results)
-        .map(|(&k, r)| g.time_of_impact(k, r, &input.seg, h, &since))
+        .map(|(&k, r)| g.time_of_impact(PairAsk { k, r, seg, since }, h))
         .collect();
     g.stage.stop(timer);
     PreparedPairs {
@@ -377,7 +377,10 @@ pub fn run_group(st: &StepStatic, input: GroupInput, exec: &mut dyn Executor) ->
         out.busy_s = clock.elapsed().as_secs_f64() + prepared_s;
         out
     });
-    GroupReply(Some(output.map_err(GroupFailure::from)), region.captured)
+    GroupReply(
+        Some(output.map_err(GroupFailure::from)),
+        region.gathered.captured,
+    )
 }
 
 /// Where a group's realised paths met what it did not hold.
@@ -714,9 +717,13 @@ fn paths_meet(
             }
         }
         let r = g.query_at(0, 1, &seg, to);
-        if g.time_of_impact_within((0, 1), &r, &seg, (from, to), &since)
-            .is_some()
-        {
+        let q = PairAsk {
+            k: (0, 1),
+            r: &r,
+            seg: &seg,
+            since: &since,
+        };
+        if g.time_of_impact_within(q, (from, to)).is_some() {
             result = None;
             break;
         }

@@ -8,7 +8,7 @@ use super::executor::{Executor, GroupOutput, PairKey, PreparedPairs, Segment, Si
 use super::region::{PairMap, Region};
 use super::stats::{NumericalFailure, check_states};
 use super::timers::{Stage, StageTimer};
-use super::toi::{Search, SolvedSince};
+use super::toi::{PairAsk, Search, SolvedSince};
 use crate::body::{Activity, BodyState};
 use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
@@ -206,7 +206,8 @@ impl PairBook {
             if accepted.contains(&k) {
                 continue;
             }
-            let search = g.begin_time_of_impact(k, &self.results[&k], seg, h, since);
+            let r = &self.results[&k];
+            let search = g.begin_time_of_impact(PairAsk { k, r, seg, since }, h);
             self.wait_or_find(k, search);
         }
         loop {
@@ -803,7 +804,7 @@ impl EventLoop {
             results,
             warm: take(g.warm).into_iter().collect(),
             impacts: take(g.impacts),
-            pair_forces: take(&mut g.pair_forces).into_iter().collect(),
+            pair_forces: take(&mut g.gathered.pair_forces).into_iter().collect(),
             counters: take(g.counters),
             stage: take(g.stage),
             events: self.events as u64,

@@ -62,7 +62,7 @@ use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
 use profile::{Profiler, StageKind, StepSink, wire_bytes};
-use region::Region;
+use region::{Gathered, Region};
 use serde::Serialize;
 use stats::{Distribution, GroupWork, RankSummary};
 use std::collections::{BTreeMap, BTreeSet};
@@ -376,11 +376,8 @@ impl World {
             impacts: &mut s.impacts,
             counters: &mut d.counters,
             stage: &mut d.stage,
-            pair_forces: BTreeMap::new(),
-            speculative_pushes: BTreeSet::new(),
-            integrated: Default::default(),
             keep_answers: false,
-            captured: Vec::new(),
+            gathered: Gathered::default(),
         };
         let result = frame::step_world(
             &mut world,
@@ -391,11 +388,11 @@ impl World {
             &mut s.steps,
             &mut d.group_work,
         );
-        let Region {
+        let Gathered {
             pair_forces,
             captured,
             ..
-        } = world;
+        } = world.gathered;
         d.captured_islands = captured;
         d.last_normal_force_sum = pair_forces.values().sum();
         d.last_pair_forces = pair_forces

@@ -56,6 +56,18 @@ pub(crate) struct Region<'s> {
     pub impacts: &'s mut Vec<Touching>,
     pub counters: &'s mut Counters,
     pub stage: &'s mut StageSeconds,
+    /// Whether its island answers, times of impact and pair tests are kept
+    /// for a later run of the same events (`super::kept`): a part of a
+    /// split group, which may step again merged with the parts it met.
+    pub keep_answers: bool,
+    /// What it gathers within the step (nothing, at first).
+    pub gathered: Gathered,
+}
+
+/// What a region gathers within a step, the same for the world and for a
+/// group: `Default` is a region's start (nothing gathered).
+#[derive(Default)]
+pub(crate) struct Gathered {
     /// Total resting normal force on each pair in its latest solve.
     pub pair_forces: BTreeMap<(BodyId, BodyId), f64>,
     /// Pairs a speculative contact pushed on in this step (it held a
@@ -64,10 +76,6 @@ pub(crate) struct Region<'s> {
     pub speculative_pushes: BTreeSet<(BodyId, BodyId)>,
     /// Integrations along segments already done (`integrate_segment`).
     pub integrated: Integrated,
-    /// Whether its island answers, times of impact and pair tests are kept
-    /// for a later run of the same events (`super::kept`): a part of a
-    /// split group, which may step again merged with the parts it met.
-    pub keep_answers: bool,
     /// Copies of the islands it built of `StepSettings::capture_min_rows`
     /// rows or more, in the order it built them (empty unless asked for).
     pub captured: Vec<IslandTask>,
@@ -102,11 +110,8 @@ impl RegionState {
             impacts: &mut self.impacts,
             counters: &mut self.counters,
             stage: &mut self.stage,
-            pair_forces: BTreeMap::new(),
-            speculative_pushes: BTreeSet::new(),
-            integrated: Integrated::default(),
             keep_answers: false,
-            captured: Vec::new(),
+            gathered: Gathered::default(),
         }
     }
 }
@@ -183,7 +188,7 @@ impl<'s> Region<'s> {
             s.torque.z,
         ]
         .map(f64::to_bits);
-        if let Some(done) = self.integrated.0.borrow().get(&key) {
+        if let Some(done) = self.gathered.integrated.0.borrow().get(&key) {
             return *done;
         }
         let done = integrate(
@@ -194,7 +199,7 @@ impl<'s> Region<'s> {
             &s.torque,
             h,
         );
-        let mut memo = self.integrated.0.borrow_mut();
+        let mut memo = self.gathered.integrated.0.borrow_mut();
         if memo.len() >= INTEGRATED_KEPT {
             memo.clear();
         }

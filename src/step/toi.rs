@@ -40,6 +40,25 @@ pub(crate) fn allowed_depth(carried: f64) -> f64 {
 /// overlap its points already had then is carried, not new
 /// (`Region::sinking`). Pairs not listed carried none.
 pub(crate) type SolvedSince = PairMap<Since>;
+/// One pair's time-of-impact question: pair `k` on the bodies' segments
+/// `seg`, `r` its result at the end of the stretch searched, and when each
+/// pair's contacts were last solved.
+#[derive(Clone, Copy)]
+pub(crate) struct PairAsk<'q> {
+    pub k: PairKey,
+    pub r: &'q PairResult,
+    pub seg: &'q [Segment],
+    pub since: &'q SolvedSince,
+}
+
+impl PairAsk<'_> {
+    /// The stretch from where both bodies' segments start to `h`.
+    fn stretch_to(&self, h: f64) -> (f64, f64) {
+        let (a, b) = (self.k.0 as usize, self.k.1 as usize);
+        (self.seg[a].time.max(self.seg[b].time), h)
+    }
+}
+
 /// An instant at which a pair was found apart, and V-Clip's distance then.
 type Apart = (f64, f64);
 
@@ -130,32 +149,28 @@ impl Region<'_> {
 
     /// Time of impact of one pair in this step, if it overlaps (or a fast
     /// pair crossed) beyond what it carried into its segment.
-    pub(crate) fn time_of_impact(
-        &mut self,
-        k: PairKey,
-        r: &PairResult,
-        seg: &[Segment],
-        h: f64,
-        since: &SolvedSince,
-    ) -> Option<f64> {
-        let start = seg[k.0 as usize].time.max(seg[k.1 as usize].time);
-        self.time_of_impact_within(k, r, seg, (start, h), since)
+    pub(crate) fn time_of_impact(&mut self, q: PairAsk, h: f64) -> Option<f64> {
+        self.time_of_impact_within(q, q.stretch_to(h))
     }
 
     /// Time of impact of one pair between `lo` and `hi` (both bodies on
-    /// their segments there; `r` is the pair's result at `hi`), if it
+    /// their segments there; `q.r` is the pair's result at `hi`), if it
     /// overlaps (or a fast pair crossed) beyond what it carried: the same
     /// search as `time_of_impact`, on a stretch of the step.
     pub(crate) fn time_of_impact_within(
         &mut self,
-        k: PairKey,
-        r: &PairResult,
-        seg: &[Segment],
+        q: PairAsk,
         (start, h): (f64, f64),
-        since: &SolvedSince,
     ) -> Option<f64> {
+        let searched = |g: &mut Self| {
+            let search = g.begin_search(q, (start, h));
+            match g.continue_search(search, q.seg, f64::INFINITY) {
+                Search::Found(tau) => tau,
+                _ => unreachable!("a search without a limit ends"),
+            }
+        };
         if !self.keep_answers {
-            return self.time_of_impact_searched(k, r, seg, (start, h), since);
+            return searched(self);
         }
         // A part of a split group (`super::kept`): the search reads the
         // step's start, the two bodies and their segments, the interval,
@@ -163,6 +178,7 @@ impl Region<'_> {
         thread_local! {
             static KEPT: std::cell::RefCell<Kept<Option<f64>>> = Default::default();
         }
+        let PairAsk { k, r, seg, since } = q;
         let (a, b) = (k.0 as usize, k.1 as usize);
         let question = kept::question(&(
             self.st.t0,
@@ -174,60 +190,25 @@ impl Region<'_> {
             r,
             self.features.get(&k),
         ));
-        kept::one_again_or_anew(
-            &KEPT,
-            question,
-            || self.time_of_impact_searched(k, r, seg, (start, h), since),
-            16,
-        )
+        kept::one_again_or_anew(&KEPT, question, || searched(self), 16)
     }
 
-    /// `time_of_impact_within`, searched.
-    fn time_of_impact_searched(
-        &mut self,
-        k: PairKey,
-        r: &PairResult,
-        seg: &[Segment],
-        (start, h): (f64, f64),
-        since: &SolvedSince,
-    ) -> Option<f64> {
-        let search = self.begin_search(k, r, seg, (start, h), since);
-        match self.continue_search(search, seg, f64::INFINITY) {
-            Search::Found(tau) => tau,
-            _ => unreachable!("a search without a limit ends"),
-        }
-    }
-
-    /// A time-of-impact search of pair `k` over its step, taken as far as
+    /// A time-of-impact search of pair `q.k` over its step, taken as far as
     /// its first sample: `time_of_impact` in pieces (`continue_search`),
     /// for `impacts::PairBook`, which needs a pair's answer only once it
     /// could be the group's next event. A split group's part (`keep_answers`)
     /// searches whole, as `time_of_impact`, to keep its answers.
-    pub(crate) fn begin_time_of_impact(
-        &mut self,
-        k: PairKey,
-        r: &PairResult,
-        seg: &[Segment],
-        h: f64,
-        since: &SolvedSince,
-    ) -> Search {
-        let start = seg[k.0 as usize].time.max(seg[k.1 as usize].time);
+    pub(crate) fn begin_time_of_impact(&mut self, q: PairAsk, h: f64) -> Search {
         if self.keep_answers {
-            return Search::Found(self.time_of_impact_within(k, r, seg, (start, h), since));
+            return Search::Found(self.time_of_impact(q, h));
         }
-        self.begin_search(k, r, seg, (start, h), since)
+        self.begin_search(q, q.stretch_to(h))
     }
 
     /// The search's set-up: the bounds its samples are spaced by, and the
     /// last stretch the end-of-step result proves apart.
-    fn begin_search(
-        &mut self,
-        k: PairKey,
-        r: &PairResult,
-        seg: &[Segment],
-        (start, h): (f64, f64),
-        since: &SolvedSince,
-    ) -> Search {
+    fn begin_search(&mut self, q: PairAsk, (start, h): (f64, f64)) -> Search {
+        let PairAsk { k, r, seg, since } = q;
         let (a, b) = (k.0 as usize, k.1 as usize);
         let since = since.get(&k).copied();
         let end_overlaps = self.overlaps_more((a, b), r, h, seg, since);

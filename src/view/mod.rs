@@ -14,7 +14,7 @@
 
 pub(crate) mod http;
 pub(crate) mod mesh;
-mod page;
+pub(crate) mod page;
 pub(crate) mod replay_data;
 mod run_output;
 mod serve;

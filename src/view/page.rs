@@ -16,38 +16,51 @@ fn json_in_script(json: &str) -> String {
     json.replace('<', "\\u003c")
 }
 
-fn html_escape(text: &str) -> String {
+pub(crate) fn html_escape(text: &str) -> String {
     text.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
 }
 
-/// The whole page for `scene_name`.
-pub fn html(scene_name: &str, data: &ReplayData) -> String {
-    let header = serde_json::to_string(&data.header).expect("the header is plain data");
-    let base64 = base64::engine::general_purpose::STANDARD.encode(&data.binary);
-    // Placeholders are replaced in one pass over the template, so nothing
-    // substituted (a scene name, the bundle) is searched for placeholders.
-    let mut out =
-        String::with_capacity(TEMPLATE.len() + BUNDLE.len() + header.len() + base64.len());
-    let mut rest = TEMPLATE;
+/// `template` (the file `name`, for the panic) with each `{{KEY}}` replaced
+/// by `KEY`'s text in `values`. Placeholders are replaced in one pass over
+/// the template, so nothing substituted (a scene name, a bundle) is
+/// searched for placeholders.
+pub(crate) fn fill_template(template: &str, name: &str, values: &[(&str, &str)]) -> String {
+    let filled: usize = values.iter().map(|(_, text)| text.len()).sum();
+    let mut out = String::with_capacity(template.len() + filled);
+    let mut rest = template;
     while let Some(start) = rest.find("{{") {
         let end = start
             + rest[start..]
                 .find("}}")
                 .expect("template placeholders are closed");
         out.push_str(&rest[..start]);
-        match &rest[start + 2..end] {
-            "TITLE" => out.push_str(&html_escape(scene_name)),
-            "HEADER" => out.push_str(&json_in_script(&header)),
-            "DATA" => out.push_str(&base64),
-            "SCRIPT" => out.push_str(BUNDLE),
-            other => panic!("unknown placeholder {other} in viewer/src/replay.html"),
+        let key = &rest[start + 2..end];
+        match values.iter().find(|(k, _)| *k == key) {
+            Some((_, text)) => out.push_str(text),
+            None => panic!("unknown placeholder {key} in {name}"),
         }
         rest = &rest[end + 2..];
     }
     out.push_str(rest);
     out
+}
+
+/// The whole page for `scene_name`.
+pub fn html(scene_name: &str, data: &ReplayData) -> String {
+    let header = serde_json::to_string(&data.header).expect("the header is plain data");
+    let base64 = base64::engine::general_purpose::STANDARD.encode(&data.binary);
+    fill_template(
+        TEMPLATE,
+        "viewer/src/replay.html",
+        &[
+            ("TITLE", &html_escape(scene_name)),
+            ("HEADER", &json_in_script(&header)),
+            ("DATA", &base64),
+            ("SCRIPT", BUNDLE),
+        ],
+    )
 }
 
 #[cfg(test)]

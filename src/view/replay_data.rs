@@ -16,7 +16,7 @@ use super::mesh::triangulate;
 use super::run_output::{Row, RunOutput};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rigidsim::body::BodyKind;
-use rigidsim::scene::Scene;
+use rigidsim::scene::{Scene, Settings};
 use serde::Serialize;
 
 /// Version of the layout above and of the header; the page checks it.
@@ -207,6 +207,7 @@ impl ReplayData {
             potential_j.push(potential);
         }
 
+        let (body_object, body_kind, body_mass) = body_columns(scene);
         let header = Header {
             format: FORMAT,
             scene: scene.name.clone(),
@@ -215,31 +216,13 @@ impl ReplayData {
             bodies: n,
             samples,
             gravity: settings.gravity.into(),
-            fall_z: settings.fall_z.is_finite().then_some(settings.fall_z),
-            camera: settings.render.as_ref().and_then(|r| {
-                Some(Camera {
-                    eye: r.eye?.into(),
-                    target: r.target?.into(),
-                    fov_y_deg: r.fov_y_deg,
-                })
-            }),
+            fall_z: fall_z(settings),
+            camera: camera(settings),
             floor: floor(scene),
             objects,
-            body_object: scene.bodies.iter().map(|b| b.object.0 as usize).collect(),
-            body_kind: scene
-                .bodies
-                .iter()
-                .map(|b| match b.kind {
-                    BodyKind::Dynamic => "dynamic",
-                    BodyKind::Fixed => "fixed",
-                    BodyKind::Driven { .. } => "driven",
-                })
-                .collect(),
-            body_mass: scene
-                .bodies
-                .iter()
-                .map(|b| scene.objects[b.object.0 as usize].mass)
-                .collect(),
+            body_object,
+            body_kind,
+            body_mass,
             fallen: run.fallen.clone(),
             kinetic_j,
             potential_j,
@@ -255,6 +238,44 @@ impl ReplayData {
             binary: block.0,
         }
     }
+}
+
+/// `None`: the scene's `fall_z` is no cut-off (−∞).
+pub(crate) fn fall_z(settings: &Settings) -> Option<f64> {
+    settings.fall_z.is_finite().then_some(settings.fall_z)
+}
+
+/// The scene's `[render]` camera, where it names an eye and a target.
+pub(crate) fn camera(settings: &Settings) -> Option<Camera> {
+    settings.render.as_ref().and_then(|r| {
+        Some(Camera {
+            eye: r.eye?.into(),
+            target: r.target?.into(),
+            fov_y_deg: r.fov_y_deg,
+        })
+    })
+}
+
+/// A body's kind as the pages name it: `dynamic` | `fixed` | `driven`.
+pub(crate) fn kind_name(kind: &BodyKind) -> &'static str {
+    match kind {
+        BodyKind::Dynamic => "dynamic",
+        BodyKind::Fixed => "fixed",
+        BodyKind::Driven { .. } => "driven",
+    }
+}
+
+/// Per body: its object's index, its kind (`kind_name`) and its mass [kg].
+pub(crate) fn body_columns(scene: &Scene) -> (Vec<usize>, Vec<&'static str>, Vec<f64>) {
+    let bodies = &scene.bodies;
+    (
+        bodies.iter().map(|b| b.object.0 as usize).collect(),
+        bodies.iter().map(|b| kind_name(&b.kind)).collect(),
+        bodies
+            .iter()
+            .map(|b| scene.objects[b.object.0 as usize].mass)
+            .collect(),
+    )
 }
 
 /// The floor grid: on the top of the widest fixed body (the floor of the

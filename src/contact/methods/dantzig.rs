@@ -137,9 +137,34 @@ impl<'a> Dantzig<'a> {
         WORKSPACE.with(|ws| ws.borrow_mut().solve(&problem, &self.options))
     }
 
-    /// The answer where Dantzig's method failed on the system (`fallback`).
+    /// When the coupled friction problem fails (the friction bounds depend on the
+    /// normal impulses, which is not an LCP and may not converge): solve the
+    /// normal rows alone exactly, then the whole system with the friction bounds
+    /// frozen at μ times those normal impulses (a boxed LCP with constant
+    /// bounds). Projected Gauss–Seidel is the last resort.
     pub(crate) fn fallback(&self) -> Vec<f64> {
-        fallback(&self.a, self.b.len(), self.b, self.lo, self.hi, self.findex)
+        let (a, m, b, lo, hi, findex) = (
+            &self.a[..],
+            self.b.len(),
+            self.b,
+            self.lo,
+            self.hi,
+            self.findex,
+        );
+        let Some(pn) = solve_normal_rows(a, m, b, findex) else {
+            return projected_gauss_seidel(a, m, b, lo, hi, findex);
+        };
+        let (mut flo, mut fhi) = (lo.to_vec(), hi.to_vec());
+        for i in 0..m {
+            if let Some(j) = findex[i] {
+                flo[i] = lo[i] * pn[j];
+                fhi[i] = hi[i] * pn[j];
+            }
+        }
+        match lcp::solve(&lcp::LcpProblem::boxed(a, b, &flo, &fhi)) {
+            Ok(full) => full.x,
+            Err(_) => pn,
+        }
     }
 }
 
@@ -150,35 +175,6 @@ fn compliant(a: &[f64], m: usize) -> Vec<f64> {
         reg[i * m + i] += COMPLIANCE * scale;
     }
     reg
-}
-
-/// When the coupled friction problem fails (the friction bounds depend on the
-/// normal impulses, which is not an LCP and may not converge): solve the
-/// normal rows alone exactly, then the whole system with the friction bounds
-/// frozen at μ times those normal impulses (a boxed LCP with constant
-/// bounds). Projected Gauss–Seidel is the last resort.
-fn fallback(
-    a: &[f64],
-    m: usize,
-    b: &[f64],
-    lo: &[f64],
-    hi: &[f64],
-    findex: &[Option<usize>],
-) -> Vec<f64> {
-    let Some(pn) = solve_normal_rows(a, m, b, findex) else {
-        return projected_gauss_seidel(a, m, b, lo, hi, findex);
-    };
-    let (mut flo, mut fhi) = (lo.to_vec(), hi.to_vec());
-    for i in 0..m {
-        if let Some(j) = findex[i] {
-            flo[i] = lo[i] * pn[j];
-            fhi[i] = hi[i] * pn[j];
-        }
-    }
-    match lcp::solve(&lcp::LcpProblem::boxed(a, b, &flo, &fhi)) {
-        Ok(full) => full.x,
-        Err(_) => pn,
-    }
 }
 
 /// The standard LCP on the normal rows alone (friction rows left at zero),

@@ -115,10 +115,9 @@ pub fn projected_gauss_seidel(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::body::BodyId;
     use crate::contact::system::{ITERATIVE_COMPLIANCE, Row};
-    use crate::contact::task::{IslandBody, fixed_body};
-    use nalgebra::{Matrix3, Vector3};
+    use crate::contact::task::{fixed_body, stacked_cube};
+    use nalgebra::Vector3;
 
     /// A frictionless stack of `n` 1 kg bodies on a fixed floor in the
     /// resting phase (every body about to fall g·h), solved by sequential
@@ -129,14 +128,7 @@ mod tests {
         let (g, h) = (9.81, 0.01);
         let mut bodies = vec![fixed_body(Vector3::zeros())];
         for k in 1..=n {
-            bodies.push(IslandBody {
-                id: BodyId(k as u32),
-                inv_mass: 1.0,
-                inv_inertia: Matrix3::identity() * 6.0,
-                position: Vector3::new(0.0, 0.0, k as f64 - 0.5),
-                velocity: Vector3::new(0.0, 0.0, -g * h),
-                ..bodies[0].clone()
-            });
+            bodies.push(stacked_cube(k, Vector3::new(0.0, 0.0, -g * h)));
         }
         // Contact k joins body k + 1 (above, A) to body k (below, B).
         let rows: Vec<Row> = (0..n)
