@@ -6,7 +6,8 @@
 #     rate to the worker); one rank then predicts over that link, and
 #     `mpirun -np 2` measures the ratio it predicts;
 #   - the lab's default link (100 Mbit/s as scripts/lab.sh measured it):
-#     one rank predicts 2, 4, 8 and 16 ranks;
+#     one rank predicts 2, 4, 8 and 16 ranks, with its groups whole and
+#     with --split-groups (the parts it steps are the tasks predicted);
 #   - with LAB=1, scripts/lab.sh with 2 PCs at 100 and 10 Mbit/s measures
 #     crowd200 against one rank's prediction over each link.
 # Scenes: crowd200 for 2 s (REPS runs each, interleaved), crowd1000 for
@@ -66,6 +67,7 @@ for scene in $SCENES; do
     run "$scene" 2 "$tmp/$scene-np2-$rep"
   done
   run "$scene" 1 "$tmp/$scene-lab"
+  run "$scene" 1 "$tmp/$scene-split-lab" --split-groups
 done
 if [ "$LAB" = 1 ]; then
   for link in 100mbit 10mbit; do
@@ -105,14 +107,15 @@ for scene in scenes:
     print(f"| {scene} | {n} | {w1:.2f} | {w2:.2f} | {w2 / w1:.3f} | {pred:.3f} | "
           f"{(pred - w2 / w1) / (w2 / w1) * 100:+.0f} % | {', '.join(sorted(hashes))} |")
 print("\n## Predicted over a lab's 100 Mbit/s (the default link)\n")
-print("| scene | 1 rank [s] | 2 ranks | 4 | 8 | 16 | largest group's share | group-stage bound at 16 |")
-print("|---|---|---|---|---|---|---|---|")
+print("| scene | groups | 1 rank [s] | 2 ranks | 4 | 8 | 16 | largest group's share | group-stage bound at 16 | state hash |")
+print("|---|---|---|---|---|---|---|---|---|---|")
 for scene in scenes:
-    s = load(f"{scene}-lab")
-    d = s["distributed"]
-    sp = " | ".join(f"{p['speedup']:.2f}" for p in d["predicted"])
-    print(f"| {scene} | {s['wall_time_s']:.2f} | {sp} | {d['largest_group_share']:.3f} | "
-          f"{d['group_speedup_bound'][-1]['speedup']:.2f} |")
+    for groups, run in (("whole", f"{scene}-lab"), ("split", f"{scene}-split-lab")):
+        s = load(run)
+        d = s["distributed"]
+        sp = " | ".join(f"{p['speedup']:.2f}" for p in d["predicted"])
+        print(f"| {scene} | {groups} | {s['wall_time_s']:.2f} | {sp} | {d['largest_group_share']:.3f} | "
+              f"{d['group_speedup_bound'][-1]['speedup']:.2f} | {s['state_hash']} |")
 if lab == "1":
     print("\n## crowd200 on 2 PCs of scripts/lab.sh against one rank's prediction over the measured link\n")
     print("| link | measured round trip [ms] | measured rate [MB/s] | 2 PCs [s] | 1 rank [s] | measured 2 / 1 | predicted 2 / 1 |")
