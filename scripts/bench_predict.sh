@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The speed-up a one-rank run predicts (summary.json's
+# The speed-up a one-rank run predicts (`--predict`, summary.json's
 # distributed.predicted, docs/architecture.md "The speed-up a lab can
 # expect") against what the ranks measure, on this machine, --no-render:
 #   - shared memory: a short 2-rank run measures the link (round trip and
@@ -63,11 +63,11 @@ echo "bench_predict: shared memory: $latency_us us one way, $rate B/s" >&2
 
 for scene in $SCENES; do
   for rep in $(seq 1 "$(reps "$scene")"); do
-    run "$scene" 1 "$tmp/$scene-shm-$rep" --link-latency-us "$latency_us" --link-bytes-per-s "$rate"
+    run "$scene" 1 "$tmp/$scene-shm-$rep" --predict --link-latency-us "$latency_us" --link-bytes-per-s "$rate"
     run "$scene" 2 "$tmp/$scene-np2-$rep"
   done
-  run "$scene" 1 "$tmp/$scene-lab"
-  run "$scene" 1 "$tmp/$scene-split-lab" --split-groups
+  run "$scene" 1 "$tmp/$scene-lab" --predict
+  run "$scene" 1 "$tmp/$scene-split-lab" --predict --split-groups
 done
 if [ "$LAB" = 1 ]; then
   for link in 100mbit 10mbit; do
@@ -82,7 +82,7 @@ rate = next(r["link_bytes_per_s"] for r in s["per_rank"] if r.get("link_bytes_pe
 print(s["distributed"]["message_latency_s"] / 2 * 1e6, rate)
 PY
 )
-    run crowd200 1 "$tmp/lab-$link-predicted" --link-latency-us "$l" --link-bytes-per-s "$r"
+    run crowd200 1 "$tmp/lab-$link-predicted" --predict --link-latency-us "$l" --link-bytes-per-s "$r"
   done
 fi
 

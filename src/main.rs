@@ -126,13 +126,17 @@ struct RunArgs {
     /// Distribute every stage whatever its size (tests of determinism and balance).
     #[arg(long)]
     force_distribute: bool,
-    /// The link a one-rank run predicts the cluster over (summary.json's
-    /// `distributed.predicted`): one-way latency in microseconds (default
+    /// On one rank: time each task of the stages other ranks could take and
+    /// predict the whole step on 2, 4, 8 and 16 ranks over the link below
+    /// (summary.json's `distributed.predicted`; costs about 1 % of the run).
+    #[arg(long)]
+    predict: bool,
+    /// The link --predict assumes: one-way latency in microseconds (default
     /// half the 1.1 ms round trip of a lab's 100 Mbit/s network).
     #[arg(long, value_name = "US", default_value_t = LAB_LATENCY_US)]
     link_latency_us: f64,
-    /// The same link's rate in bytes per second (default the 7.7 MB/s of
-    /// MPI payload a lab's 100 Mbit/s network carries).
+    /// The link's rate in bytes per second (default the 7.7 MB/s of MPI
+    /// payload a lab's 100 Mbit/s network carries).
     #[arg(long, value_name = "B", default_value_t = LinkModel::LAB_100_MBIT.bytes_per_s)]
     link_bytes_per_s: f64,
     /// Write the full simulation state to OUT/checkpoint.bin every S
@@ -678,7 +682,11 @@ impl Coordinator {
             latency_s: self.cli.link_latency_us / 1e6,
             bytes_per_s: self.cli.link_bytes_per_s,
         };
-        let mut inline = Inline::profiled(Box::new(Prediction::new(link)));
+        let mut inline = if self.cli.predict {
+            Inline::profiled(Box::new(Prediction::new(link)))
+        } else {
+            Inline::default()
+        };
         let mut mpi_exec;
         let mut link_rates = Vec::new();
         let exec: &mut dyn Executor = if self.roles.workers.is_empty() {

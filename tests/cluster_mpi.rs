@@ -1168,14 +1168,15 @@ fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
     }
 }
 
-/// A one-rank run predicts the whole step on 2 to 16 ranks from its own
-/// tasks (`distributed.predicted`, `cluster::predict`): never slower than
-/// one rank (a stage stays home where sharing it does not pay), at most R
+/// A one-rank run with `--predict` predicts the whole step on 2 to 16
+/// ranks from its own tasks (`distributed.predicted`, `cluster::predict`):
+/// never slower than one rank (a stage stays home where sharing it does
+/// not pay), at most R
 /// times faster, growing with R, never past the Amdahl bound of the work
 /// the stages hold, and as many seconds as the run took at one rank. Over
 /// a link that costs nothing the stages are shared out (`--link-*` change
-/// no result). Runs on several ranks predict nothing: their tasks ran
-/// elsewhere.
+/// no result). Runs on several ranks predict nothing (their tasks ran
+/// elsewhere), nor does a run without `--predict`.
 #[test]
 fn one_rank_predicts_the_whole_step_on_several_ranks() {
     let _one = one_at_a_time();
@@ -1186,7 +1187,7 @@ fn one_rank_predicts_the_whole_step_on_several_ranks() {
         "lab",
         Ranks::Alone,
         &nuts,
-        &["--duration", "1.0", "--no-render"],
+        &["--duration", "1.0", "--no-render", "--predict"],
     );
     let d = &lab.summary["distributed"];
     let link = &d["prediction_link"];
@@ -1229,6 +1230,7 @@ fn one_rank_predicts_the_whole_step_on_several_ranks() {
             "--duration",
             "1.0",
             "--no-render",
+            "--predict",
             "--link-latency-us",
             "0",
             "--link-bytes-per-s",
@@ -1247,12 +1249,17 @@ fn one_rank_predicts_the_whole_step_on_several_ranks() {
         "two",
         Ranks::Np(2),
         &nuts,
+        &["--duration", "0.3", "--no-render", "--predict"],
+    );
+    let plain = run(
+        root.path(),
+        "plain",
+        Ranks::Alone,
+        &nuts,
         &["--duration", "0.3", "--no-render"],
     );
-    assert_eq!(
-        two.summary["distributed"]["predicted"]
-            .as_array()
-            .map(Vec::len),
-        Some(0)
-    );
+    for r in [two, plain] {
+        let predicted = &r.summary["distributed"]["predicted"];
+        assert_eq!(predicted.as_array().map(Vec::len), Some(0));
+    }
 }

@@ -9,8 +9,8 @@
 //! self-scheduled stages (island solves, group steps, the first stage of
 //! large groups) as `scatter.rs` hands out chunks, the narrowphase by the
 //! greedy plan (`schedule::assign`). Every message crosses rank 0's one
-//! link, one after another (`schedule::Link`). Groups count whole, as
-//! `--whole-groups` runs them: splitting a pile is not predicted.
+//! link, one after another (`schedule::Link`). Groups count as the run
+//! stepped them: whole, or split into parts with `--split-groups`.
 
 use super::scatter::{CHUNK_SHARE, COORDINATOR_SHARE};
 use super::schedule;
@@ -58,15 +58,16 @@ impl StepSink for Prediction {
     fn step(&mut self, profile: &StepProfile) {
         let own = (profile.wall_s - profile.stage_seconds()).max(0.0);
         self.one_rank_s += profile.wall_s;
-        for (i, &ranks) in BOUND_RANKS.iter().enumerate() {
-            let step_s = own
-                + profile
-                    .stages
-                    .iter()
-                    .map(|call| stage_s(call, ranks as usize, &self.link))
-                    .sum::<f64>();
-            self.predicted_s[i] += step_s;
-            self.worst_step_s[i] = self.worst_step_s[i].max(step_s);
+        let mut step_s = [own; BOUND_RANKS.len()];
+        for call in &profile.stages {
+            let best = stage_s_up_to(call, MOST_RANKS, &self.link);
+            for (s, &ranks) in step_s.iter_mut().zip(&BOUND_RANKS) {
+                *s += best[ranks as usize - 1];
+            }
+        }
+        for (i, s) in step_s.into_iter().enumerate() {
+            self.predicted_s[i] += s;
+            self.worst_step_s[i] = self.worst_step_s[i].max(s);
         }
     }
 
@@ -92,23 +93,35 @@ impl StepSink for Prediction {
     }
 }
 
+/// The most ranks predicted.
+const MOST_RANKS: usize = BOUND_RANKS[BOUND_RANKS.len() - 1] as usize;
+
 /// Seconds one stage call takes on up to `ranks` ranks: alone, or shared
 /// with as many workers as is fastest (the scheduler chooses how many,
 /// `schedule::workers_to_use_over_link`, and keeps a stage home where
 /// none pays).
 pub fn stage_s(call: &StageCall, ranks: usize, link: &LinkModel) -> f64 {
+    stage_s_up_to(call, ranks, link)[ranks - 1]
+}
+
+/// `stage_s` for 1, 2, … `most` ranks, each sharing simulated once.
+fn stage_s_up_to(call: &StageCall, most: usize, link: &LinkModel) -> Vec<f64> {
     let alone: f64 = call.tasks.iter().map(|t| t.seconds).sum();
+    let mut best = vec![alone; most];
     if call.tasks.len() < 2 {
-        return alone;
+        return best;
     }
-    (2..=ranks)
-        .map(|r| match call.kind {
+    let order = largest_first(&call.tasks);
+    for r in 2..=most {
+        let shared = match call.kind {
             StageKind::Narrowphase => planned_s(&call.tasks, r, link),
             StageKind::IslandSolves | StageKind::GroupSteps | StageKind::PreparePairs => {
-                self_scheduled_s(&call.tasks, r, link)
+                self_scheduled_s(&call.tasks, &order, r, link)
             }
-        })
-        .fold(alone, f64::min)
+        };
+        best[r - 1] = best[r - 2].min(shared);
+    }
+    best
 }
 
 /// Rank 0's link, which carries one message at a time.
@@ -131,8 +144,7 @@ impl SharedLink<'_> {
 /// one at a time from the back, each worker a chunk from the front of at
 /// least `CHUNK_SHARE` of its share of what is left, the next chunk one
 /// round trip after it answers. Every rank as fast as this one.
-fn self_scheduled_s(tasks: &[TaskCost], ranks: usize, link: &LinkModel) -> f64 {
-    let order = largest_first(tasks);
+fn self_scheduled_s(tasks: &[TaskCost], order: &[usize], ranks: usize, link: &LinkModel) -> f64 {
     let (mut front, mut back) = (0, order.len());
     let mut left: f64 = tasks.iter().map(|t| t.seconds).sum();
     let mut rank0 = 0.0_f64;
