@@ -15,7 +15,8 @@
 # Prints and writes bench/results/<machine>/predict.md.
 #
 # Usage: scripts/bench_predict.sh
-# Knobs: REPS=3 BIN_DURATION=1.0 SCENES="crowd200 crowd1000 bin" LAB=0
+# Knobs: REPS=3 BIN_DURATION=1.0 SCENES="crowd200 crowd1000 bin" (SCENES= for
+# the lab runs alone) LAB=0
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
@@ -24,7 +25,7 @@ source scripts/crowd.sh
 machine=${BENCH_MACHINE:-$(hostname)-$(nproc)cpu}
 out=${OUT:-bench/results/$machine}
 REPS=${REPS:-3}; BIN_DURATION=${BIN_DURATION:-1.0}
-SCENES=${SCENES:-"crowd200 crowd1000 bin"}; LAB=${LAB:-0}
+SCENES=${SCENES-"crowd200 crowd1000 bin"}; LAB=${LAB:-0}
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
 cargo build --release --quiet
@@ -92,6 +93,8 @@ tmp, commit, reps, lab, latency_us, rate = sys.argv[1:7]
 scenes = sys.argv[7:]
 load = lambda d: json.load(open(f"{tmp}/{d}/summary.json"))
 print(f"## Predicted against measured, at {commit} (`scripts/bench_predict.sh`)\n")
+if not scenes:
+    print("(no scenes: SCENES=)\n")
 print(f"Shared memory as a 2-rank run measured it: {float(latency_us):.2f} µs one way, "
       f"{float(rate) / 1e6:.0f} MB/s.\n")
 print("| scene | runs | 1 rank [s] | 2 ranks [s] | measured 2 / 1 | predicted 2 / 1 | prediction off by | state hashes |")
