@@ -14,6 +14,11 @@ use super::task::{
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use nalgebra::Vector3;
 
+/// A row whose diagonal A_ii is at most this moves nothing: no body behind
+/// it can be pushed (both static, or a friction row of no lever), so every
+/// method leaves it out rather than divide by it.
+pub(crate) const NO_RESPONSE: f64 = 1e-300;
+
 /// Separating speeds below this (m/s) count as resting in the resting
 /// solve: a stack at rest has contact speeds of rounding size, and letting
 /// them in perturbs its redundant systems enough to send some through the
@@ -549,7 +554,7 @@ impl<'a> IterativeSystem<'a> {
         for (i, row) in self.rows.iter().enumerate() {
             let (l, h) = self.bounds(i, &state.p);
             let start = warm[i].clamp(l, h);
-            if self.diag[i] > 1e-300 && start.is_finite() && start != 0.0 {
+            if self.diag[i] > NO_RESPONSE && start.is_finite() && start != 0.0 {
                 state.p[i] = start;
                 row.change_velocities(start, &mut state.dv, &mut state.dw);
             }
@@ -572,7 +577,7 @@ impl<'a> IterativeSystem<'a> {
     /// together.
     pub(super) fn is_free(&self, i: usize, s: &IterativeState) -> bool {
         let (l, h) = self.bounds(i, &s.p);
-        self.diag[i] > 1e-300 && s.p[i] > l && s.p[i] < h
+        self.diag[i] > NO_RESPONSE && s.p[i] > l && s.p[i] < h
     }
 
     /// w_i = (A p + b)_i + c·A_ii·p_i.
@@ -599,7 +604,7 @@ impl<'a> IterativeSystem<'a> {
     /// bound, above 0 at its upper one, off 0 between; zero for a row no
     /// impulse moves. NaN where w_i is (so that `met` fails on it).
     pub(super) fn miss(&self, i: usize, s: &IterativeState) -> f64 {
-        if self.diag[i] <= 1e-300 {
+        if self.diag[i] <= NO_RESPONSE {
             return 0.0;
         }
         let wi = self.velocity(i, s);
@@ -618,7 +623,7 @@ impl<'a> IterativeSystem<'a> {
     /// diag·(p − clamp(p − w/diag)), zero exactly at an answer.
     pub(super) fn natural_residual(&self, s: &IterativeState) -> f64 {
         (0..self.rows.len())
-            .filter(|&i| self.diag[i] > 1e-300)
+            .filter(|&i| self.diag[i] > NO_RESPONSE)
             .map(|i| {
                 let wi = self.velocity(i, s);
                 let (l, h) = self.bounds(i, &s.p);
@@ -631,7 +636,7 @@ impl<'a> IterativeSystem<'a> {
     /// One projected Gauss–Seidel sweep over the rows in order.
     pub(super) fn sweep(&self, s: &mut IterativeState) {
         for (i, row) in self.rows.iter().enumerate() {
-            if self.diag[i] <= 1e-300 {
+            if self.diag[i] <= NO_RESPONSE {
                 continue;
             }
             let wi = self.velocity(i, s);

@@ -24,6 +24,7 @@
 
 use super::block_lu::{BlockLu, BlockMatrix, BlockPattern};
 use super::subspace;
+use crate::contact::system::NO_RESPONSE;
 use crate::contact::system::{IterativeState, IterativeSystem, Row, Step};
 use faer::Mat;
 use faer::linalg::solvers::{PartialPivLu, Solve};
@@ -171,12 +172,12 @@ pub(crate) fn solve(
 fn kinds(system: &IterativeSystem) -> Vec<Kind> {
     (0..system.rows.len())
         .map(|i| {
-            if system.diag[i] <= 1e-300 {
+            if system.diag[i] <= NO_RESPONSE {
                 Kind::Dead
             } else {
                 match system.findex[i] {
                     None => Kind::Normal,
-                    Some(k) if system.diag[k] > 1e-300 => Kind::Friction {
+                    Some(k) if system.diag[k] > NO_RESPONSE => Kind::Friction {
                         normal: k,
                         lo: system.lo[i],
                         hi: system.hi[i],
@@ -508,7 +509,7 @@ fn takes(moving: usize) -> bool {
 }
 
 fn max_diag(system: &IterativeSystem) -> f64 {
-    system.diag.iter().fold(1e-300f64, |a, &d| a.max(d))
+    system.diag.iter().fold(NO_RESPONSE, |a, &d| a.max(d))
 }
 
 /// Each friction row's distance to its lower and upper bound.
@@ -771,7 +772,7 @@ fn snap_to_bounds(system: &IterativeSystem, state: &mut IterativeState) {
         .map(|i| system.velocity(i, state))
         .collect();
     for (i, row) in system.rows.iter().enumerate() {
-        if system.diag[i] <= 1e-300 {
+        if system.diag[i] <= NO_RESPONSE {
             continue;
         }
         let (l, h) = system.bounds(i, &state.p);

@@ -3,6 +3,7 @@
 //! matrix.
 
 use super::subspace;
+use crate::contact::system::NO_RESPONSE;
 use crate::contact::system::{IterativeSystem, Step};
 
 /// How the sequential impulses check their answer and take the subspace
@@ -97,7 +98,7 @@ pub fn projected_gauss_seidel(
     for _ in 0..200 {
         for i in 0..m {
             let aii = a[i * m + i];
-            if aii <= 1e-300 {
+            if aii <= NO_RESPONSE {
                 continue;
             }
             let r: f64 = b[i] + (0..m).map(|j| a[i * m + j] * x[j]).sum::<f64>();
