@@ -96,15 +96,10 @@ impl StepSink for Prediction {
 /// The most ranks predicted.
 const MOST_RANKS: usize = BOUND_RANKS[BOUND_RANKS.len() - 1] as usize;
 
-/// Seconds one stage call takes on up to `ranks` ranks: alone, or shared
+/// Seconds one stage call takes on 1, 2, … `most` ranks: alone, or shared
 /// with as many workers as is fastest (the scheduler chooses how many,
 /// `schedule::workers_to_use_over_link`, and keeps a stage home where
-/// none pays).
-pub fn stage_s(call: &StageCall, ranks: usize, link: &LinkModel) -> f64 {
-    stage_s_up_to(call, ranks, link)[ranks - 1]
-}
-
-/// `stage_s` for 1, 2, … `most` ranks, each sharing simulated once.
+/// none pays). Each rank count's sharing is simulated once.
 fn stage_s_up_to(call: &StageCall, most: usize, link: &LinkModel) -> Vec<f64> {
     let alone: f64 = call.tasks.iter().map(|t| t.seconds).sum();
     let mut best = vec![alone; most];
@@ -169,8 +164,8 @@ fn self_scheduled_s(tasks: &[TaskCost], order: &[usize], ranks: usize, link: &Li
             continue;
         }
         let want = CHUNK_SHARE * left / ranks as f64;
-        let (mut cost, mut bytes) = (0.0, 0);
-        while front < back && (cost == 0.0 || cost < want) {
+        let (first, mut cost, mut bytes) = (front, 0.0, 0);
+        while front < back && (front == first || cost < want) {
             cost += tasks[order[front]].seconds;
             bytes += tasks[order[front]].bytes;
             front += 1;
@@ -219,6 +214,11 @@ fn largest_first(tasks: &[TaskCost]) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Seconds one stage call takes on up to `ranks` ranks.
+    fn stage_s(call: &StageCall, ranks: usize, link: &LinkModel) -> f64 {
+        stage_s_up_to(call, ranks, link)[ranks - 1]
+    }
 
     fn tasks(seconds: &[f64], bytes: u64) -> Vec<TaskCost> {
         seconds

@@ -152,10 +152,10 @@ impl Executor for Inline {
             .into_iter()
             .map(|input| {
                 let started = Instant::now();
-                let bytes = profiler.as_ref().map(|_| wire_bytes(&input));
+                let asked = profiler.is_some().then(|| wire_bytes(&input));
                 let reply = group::run_group(st, input, self);
-                if let (Some(p), Some(bytes)) = (&mut profiler, bytes) {
-                    p.task_of(started, bytes + wire_bytes(&reply));
+                if let (Some(p), Some(asked)) = (&mut profiler, asked) {
+                    p.task_of(started, asked + wire_bytes(&reply));
                 }
                 reply
             })
