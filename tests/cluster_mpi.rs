@@ -1108,7 +1108,8 @@ fn stalled_renderer_ends_the_job_after_the_results_are_written() {
 
 /// `summary.json` reports the parallel fraction p (the share of the wall
 /// time spent in stages other ranks can take) and the Amdahl bound
-/// 1 / (1 − p), and the group stage's bound on 2 to 16 ranks; on the nuts
+/// 1 / (1 − p), and the group stage's bound on 2 to 16 ranks, groups whole
+/// and with their event loops shared; on the nuts
 /// and bolts most of a rank's time is such work.
 #[test]
 fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
@@ -1166,6 +1167,24 @@ fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
         );
         last = s;
     }
+    // With each group's event loop shared along its critical path
+    // (`step::event_path`): never below the bound with groups whole (a
+    // loop's path is at most its work), at most R, growing with R.
+    let shared = d["event_shared_bound"].as_array().unwrap();
+    assert_eq!(shared.len(), bounds.len());
+    let mut last = 1.0;
+    for (b, whole) in shared.iter().zip(bounds) {
+        assert_eq!(b["ranks"], whole["ranks"]);
+        let (r, s) = (b["ranks"].as_f64().unwrap(), b["speedup"].as_f64().unwrap());
+        let whole = whole["speedup"].as_f64().unwrap();
+        assert!(
+            s >= last && s <= r * (1.0 + 1e-12) && s >= whole * (1.0 - 1e-12),
+            "shared bound {s} on {r} ranks after {last}, whole {whole}"
+        );
+        last = s;
+    }
+    let events = d["event_loop_parallelism"].as_f64().unwrap();
+    assert!(events >= 1.0, "events a loop holds at a time: {events}");
 }
 
 /// A one-rank run with `--predict` predicts the whole step on 2 to 16

@@ -12,7 +12,7 @@
 //! seam importing the stages back.
 
 use super::settings::StepSettings;
-use super::stats::{Counters, Distribution, NumericalFailure, RankSummary};
+use super::stats::{Counters, Distribution, GroupSeconds, NumericalFailure, RankSummary};
 use super::timers::{Stage, StageSeconds};
 use super::touching::{Touching, WarmContact};
 use crate::body::{Body, BodyId, BodyState, ObjectDef};
@@ -188,6 +188,11 @@ pub struct GroupOutput {
     pub(crate) pieces: Vec<SphereProxy>,
     /// Wall seconds the step took where it ran (the next step's prediction).
     pub(crate) busy_s: f64,
+    /// Of those, the seconds of its event loop's searches and events, and
+    /// their critical path through the bodies each reads and moves
+    /// (`event_path::EventPaths`): what the loop would take shared.
+    pub(crate) event_work_s: f64,
+    pub(crate) event_path_s: f64,
     /// V-Clip tasks of its first stage run beforehand (`PreparedPairs`):
     /// in `counters`, but counted where they ran.
     pub(crate) prepared_tasks: u64,
@@ -199,6 +204,15 @@ pub struct GroupOutput {
 }
 
 impl GroupOutput {
+    /// Its seconds as the step's group work counts them.
+    pub fn seconds(&self) -> GroupSeconds {
+        GroupSeconds {
+            busy_s: self.busy_s,
+            event_work_s: self.event_work_s,
+            event_path_s: self.event_path_s,
+        }
+    }
+
     /// V-Clip tasks and island solves the group's step ran.
     pub fn tasks(&self) -> (u64, u64) {
         (

@@ -75,7 +75,7 @@ pub(super) fn step_world(
             }
         }
     }
-    work.add_step(runs.iter().map(|g| g.busy_s));
+    work.add_step(runs.iter().map(GroupOutput::seconds));
     let mut merged = merge_groups(w, runs, done.reruns);
     // The pairs between a split group's parts, which no part held, and
     // what its first stage and the checks between its parts counted.

@@ -4,6 +4,7 @@
 //! Reads only the group's own `Region` and `GroupState` (built by `group`).
 
 use super::contact::{SolvedTogether, SpinResolves};
+use super::event_path::EventPaths;
 use super::executor::{Executor, GroupOutput, PairKey, PreparedPairs, Segment, Since};
 use super::region::{PairMap, Region};
 use super::stats::{NumericalFailure, check_states};
@@ -14,6 +15,7 @@ use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
 use std::collections::{BTreeMap, BTreeSet};
+use std::time::Instant;
 
 /// Impact events one body may take part in during a step (as one of an
 /// impact's two bodies) before the overlaps left on its pairs are accepted.
@@ -201,13 +203,16 @@ impl PairBook {
         h: f64,
         since: &SolvedSince,
         accepted: &BTreeSet<PairKey>,
+        deps: &mut EventPaths,
     ) -> Option<(PairKey, f64)> {
         for k in std::mem::take(&mut self.dirty) {
             if accepted.contains(&k) {
                 continue;
             }
+            let clock = Instant::now();
             let r = &self.results[&k];
             let search = g.begin_time_of_impact(PairAsk { k, r, seg, since }, h);
+            deps.search(bodies_of(k), clock.elapsed().as_secs_f64());
             self.wait_or_find(k, search);
         }
         loop {
@@ -226,7 +231,9 @@ impl PairBook {
                 .searches
                 .remove(&k)
                 .expect("every waiting pair has its search");
+            let clock = Instant::now();
             let search = g.continue_search(search, seg, limit);
+            deps.search(bodies_of(k), clock.elapsed().as_secs_f64());
             self.wait_or_find(k, search);
         }
         self.queue.first().map(|&(t, k)| (k, t.0))
@@ -401,6 +408,11 @@ struct Impact {
     at_tau: Vec<PairResult>,
 }
 
+/// A pair's two bodies, as indices.
+fn bodies_of((a, b): PairKey) -> (usize, usize) {
+    (a as usize, b as usize)
+}
+
 /// The dynamic bodies of `pair`.
 fn dynamic_bodies(g: &Region, (a, b): PairKey) -> Vec<usize> {
     [a as usize, b as usize]
@@ -437,6 +449,8 @@ struct EventLoop {
     /// The time of impact stage, from the first stage's end to the loop's.
     timer: StageTimer,
     prepared_tasks: u64,
+    /// The loop's events and searches on their dependency path.
+    deps: EventPaths,
 }
 
 impl EventLoop {
@@ -493,6 +507,7 @@ impl EventLoop {
             last_of: vec![None; n],
             timer,
             prepared_tasks,
+            deps: EventPaths::new(n),
         }
     }
 
@@ -511,21 +526,36 @@ impl EventLoop {
                 spin_resolve,
             } => (pair, tau, spin_resolve),
         };
+        let clock = Instant::now();
         let Some(impact) = self.impact_at(g, exec, pair, tau, spin_resolve) else {
             return Ok(true);
         };
         let pair = impact.pair;
         let world_event = ((g.ids[pair.0 as usize], g.ids[pair.1 as usize]), impact.tau);
         let own = dynamic_bodies(g, pair);
+        let mut read: Vec<usize> = impact
+            .pairs
+            .iter()
+            .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
+            .collect();
         if !own.is_empty() && own.iter().all(|&i| self.last_of[i] == Some(world_event)) {
             // No progress: keep the small overlap rather than stall the step.
             self.accept(g, pair);
+            self.deps.event(&[], &read, clock.elapsed().as_secs_f64());
             return Ok(true);
         }
         self.count_event(g, &impact, spin_resolve, &own);
         self.roll_back(g, &impact);
         let members = self.solve_at_impact(g, exec, &impact, &own, world_event)?;
-        self.retest_moved(g, exec, &members);
+        read.extend(self.retest_moved(g, exec, &members));
+        let moved: Vec<usize> = impact
+            .states
+            .iter()
+            .map(|&(i, _)| i)
+            .chain(members)
+            .collect();
+        self.deps
+            .event(&moved, &read, clock.elapsed().as_secs_f64());
         Ok(true)
     }
 
@@ -538,9 +568,14 @@ impl EventLoop {
 
     /// The next event: the earliest impact, or a spin resolve due before it.
     fn choose(&mut self, g: &mut Region) -> Choice {
-        let violation = self
-            .book
-            .earliest(g, &self.seg, self.h, &self.since, &self.accepted);
+        let violation = self.book.earliest(
+            g,
+            &self.seg,
+            self.h,
+            &self.since,
+            &self.accepted,
+            &mut self.deps,
+        );
         // An island due to be solved again (`SPIN_TRUST`) before the
         // next impact is an event of its own: its fastest spinner's group
         // rolls back and is solved as at an impact. Not before the
@@ -754,8 +789,14 @@ impl EventLoop {
     }
 
     /// The members' new paths may reach new bodies of the group: their
-    /// pairs are found and tested again; every other pair stands.
-    fn retest_moved(&mut self, g: &mut Region, exec: &mut dyn Executor, members: &[usize]) {
+    /// pairs are found and tested again; every other pair stands. Returns
+    /// the bodies of the pairs tested (each of a pair's two).
+    fn retest_moved(
+        &mut self,
+        g: &mut Region,
+        exec: &mut dyn Executor,
+        members: &[usize],
+    ) -> Vec<usize> {
         let broadphase = g.stage.start(Stage::Broadphase);
         for &i in members {
             self.book.forget(i);
@@ -765,9 +806,14 @@ impl EventLoop {
         g.counters.candidate_pairs += redo.len() as u64;
         g.stage.stop(broadphase);
         let redone = g.narrowphase_skipping_separating(exec, &redo, &self.end, &self.separating);
+        let tested = redo
+            .iter()
+            .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
+            .collect();
         for (k, r) in redo.into_iter().zip(redone) {
             self.book.insert(k, r);
         }
+        tested
     }
 
     /// The group's output once no event is left: the region's state moves
@@ -811,6 +857,8 @@ impl EventLoop {
             pieces: self.pieces.pieces,
             busy_s: 0.0,
             prepared_tasks: self.prepared_tasks,
+            event_work_s: self.deps.work_s(),
+            event_path_s: self.deps.path_s(),
         }
     }
 }

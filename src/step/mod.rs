@@ -27,6 +27,7 @@
 //! outcome never depends on which rank did what.
 
 mod contact;
+mod event_path;
 mod executor;
 mod frame;
 mod group;

@@ -262,6 +262,17 @@ pub struct Distribution {
     /// of max(the largest group, all the groups / R), where each group runs
     /// whole on one rank and every rank is as fast as this run's.
     pub group_speedup_bound: Vec<RankBound>,
+    /// The same bound were each group's event loop shared: a group takes
+    /// its time outside the loop plus the loop's critical path through the
+    /// bodies its events and searches read and move
+    /// (`step::event_path`), every event on a rank of its own as soon as
+    /// what it depends on has ended, messages free.
+    #[serde(default)]
+    pub event_shared_bound: Vec<RankBound>,
+    /// The event loops' seconds over their critical paths, summed over
+    /// the groups and steps: how many events at a time the loops hold.
+    #[serde(default)]
+    pub event_loop_parallelism: f64,
     /// The whole step on R ranks, for R in `BOUND_RANKS`, predicted from
     /// this run's measured tasks and bytes over `prediction_link` with the
     /// scheduler's rules (`cluster::predict`). Only a one-rank run
@@ -315,6 +326,11 @@ pub struct GroupWork {
     pub largest_seconds: f64,
     /// For each of `BOUND_RANKS`, the steps' max(largest group, all / R).
     pub bound_seconds: [f64; BOUND_RANKS.len()],
+    /// The same with each group's event loop shared (`GroupOutput::shared_s`).
+    pub shared_bound_seconds: [f64; BOUND_RANKS.len()],
+    /// The event loops' seconds and critical paths, summed.
+    pub event_work_s: f64,
+    pub event_path_s: f64,
 }
 
 impl GroupWork {
@@ -325,19 +341,36 @@ impl GroupWork {
         }
     }
 
-    /// Adds one step's group steps (each one's seconds where it ran).
-    pub fn add_step(&mut self, busy: impl Iterator<Item = f64>) {
-        let (mut all, mut largest) = (0.0, 0.0_f64);
-        for s in busy {
-            all += s;
-            largest = largest.max(s);
+    /// Adds one step's group steps: each one's seconds where it ran, and
+    /// its event loop's seconds and critical path.
+    pub fn add_step(&mut self, groups: impl Iterator<Item = GroupSeconds>) {
+        let (mut all, mut largest, mut longest_shared) = (0.0, 0.0_f64, 0.0_f64);
+        for g in groups {
+            all += g.busy_s;
+            largest = largest.max(g.busy_s);
+            longest_shared = longest_shared.max(g.busy_s - g.event_work_s + g.event_path_s);
+            self.event_work_s += g.event_work_s;
+            self.event_path_s += g.event_path_s;
         }
         self.seconds += all;
         self.largest_seconds += largest;
-        for (bound, &r) in self.bound_seconds.iter_mut().zip(&BOUND_RANKS) {
-            *bound += largest.max(all / f64::from(r));
+        for (k, &r) in BOUND_RANKS.iter().enumerate() {
+            let share = all / f64::from(r);
+            self.bound_seconds[k] += largest.max(share);
+            self.shared_bound_seconds[k] += longest_shared.max(share);
         }
     }
+}
+
+/// One group step's seconds, as `GroupWork::add_step` takes them.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GroupSeconds {
+    /// The whole step where it ran.
+    pub busy_s: f64,
+    /// Its event loop's searches and events (part of `busy_s`).
+    pub event_work_s: f64,
+    /// Their critical path (`step::event_path`).
+    pub event_path_s: f64,
 }
 
 impl Distribution {
@@ -357,19 +390,26 @@ impl Distribution {
         };
         self.parallel_fraction = p;
         self.amdahl_bound = 1.0 / (1.0 - p).max(1e-6);
-        self.group_speedup_bound = BOUND_RANKS
-            .iter()
-            .zip(&groups.bound_seconds)
-            .map(|(&ranks, &bound)| RankBound {
-                ranks,
-                speedup: if bound > 0.0 {
-                    groups.seconds / bound
-                } else {
-                    1.0
-                },
-            })
-            .collect();
+        self.group_speedup_bound = rank_bounds(groups.seconds, &groups.bound_seconds);
+        self.event_shared_bound = rank_bounds(groups.seconds, &groups.shared_bound_seconds);
+        self.event_loop_parallelism = if groups.event_path_s > 0.0 {
+            groups.event_work_s / groups.event_path_s
+        } else {
+            1.0
+        };
     }
+}
+
+/// `seconds` over each of `bounds`, for each of `BOUND_RANKS`.
+fn rank_bounds(seconds: f64, bounds: &[f64; BOUND_RANKS.len()]) -> Vec<RankBound> {
+    BOUND_RANKS
+        .iter()
+        .zip(bounds)
+        .map(|(&ranks, &bound)| RankBound {
+            ranks,
+            speedup: if bound > 0.0 { seconds / bound } else { 1.0 },
+        })
+        .collect()
 }
 
 /// Times the outermost distributable stage: stages called from inside
