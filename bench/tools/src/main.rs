@@ -980,7 +980,8 @@ fn bin_table(runs: &[Run], md: &mut String) {
             med(&|r| f(&r.s, &["wall_time_s"]) / f(&r.s, &["sim_time_s"])),
             at(&["worst_frame_s"]),
             at(&["counters", "toi_events"]),
-            100.0 * med(&|r| f(&r.s, &["stage_seconds", "solve_islands"]) / f(&r.s, &["wall_time_s"])),
+            100.0
+                * med(&|r| f(&r.s, &["stage_seconds", "solve_islands"]) / f(&r.s, &["wall_time_s"])),
             at(&["counters", "solve", "largest_rows"]),
             at(&["counters", "solve", "worst_violation"]),
             1e6 * at(&["max_penetration_m"]),
@@ -1244,6 +1245,27 @@ fn network(runs: &[Run], out: &Path) {
 /// with every group whole (`distributed.group_speedup_bound`); every run
 /// of a scene must end on one state hash.
 /// `many_ranks.csv`, `many_ranks.md`, `many_ranks.png`.
+/// `x` to two places, or a dash where it is not known (NaN).
+fn two_places(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.2}")
+    } else {
+        "—".into()
+    }
+}
+
+/// The `speedup` of the entry for `ranks` in a list of `{ranks, speedup}`
+/// (NaN where there is none).
+fn speedup_at(list: &Value, ranks: u32) -> f64 {
+    list.as_array()
+        .and_then(|bs| {
+            bs.iter()
+                .find(|b| b["ranks"].as_u64() == Some(u64::from(ranks)))
+        })
+        .and_then(|b| b["speedup"].as_f64())
+        .unwrap_or(f64::NAN)
+}
+
 fn many_ranks(runs: &[Run], out: &Path) {
     let mut scenes: BTreeMap<(u64, String), BTreeMap<u32, Vec<&Run>>> = BTreeMap::new();
     for r in runs.iter().filter(|r| r.series == "many_ranks") {
@@ -1257,10 +1279,11 @@ fn many_ranks(runs: &[Run], out: &Path) {
     let mut csv = String::from(
         "scene,bodies,ranks,runs,sim_s,wall_median_s,speedup,amdahl_bound,efficiency,\
          groups_distributed_share,rank0_waiting_share,largest_group_share,\
-         group_stage_bound,hashes\n",
+         group_stage_bound,group_stage_bound_events_shared,predicted_speedup,hashes\n",
     );
     let mut md = String::new();
     let (mut measured, mut bound_lines, mut per_sim) = (Vec::new(), Vec::new(), Vec::new());
+    let mut predicted_lines = Vec::new();
     let mut most_ranks = 1u32;
     for ((bodies, scene), by) in &scenes {
         let med = |rs: &[&Run], g: &dyn Fn(&Value) -> f64| {
@@ -1283,10 +1306,10 @@ fn many_ranks(runs: &[Run], out: &Path) {
             "## {scene} ({bodies} bodies), {} s simulated\n\n\
              Parallel fraction on one rank p = {p:.3} (Amdahl's bound at R ranks: \
              1 / ((1 − p) + p / R)). State hashes: {} ({}).\n\n\
-             | ranks | runs | wall [s] | speed-up | Amdahl's bound | efficiency | \
+             | ranks | runs | wall [s] | speed-up | predicted | Amdahl's bound | efficiency | \
              steps with group steps sent out | rank 0 waiting | largest group's share | \
-             group stage's bound, groups whole |\n\
-             |---|---|---|---|---|---|---|---|---|---|",
+             group stage's bound, groups whole | the same, events shared |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|---|",
             med(by.values().next().map_or(&[][..], |v| &v[..]), &|s| f(
                 s,
                 &["sim_time_s"]
@@ -1298,7 +1321,7 @@ fn many_ranks(runs: &[Run], out: &Path) {
                 "DIFFER"
             }
         );
-        let (mut line, mut bound) = (Vec::new(), Vec::new());
+        let (mut line, mut bound, mut predicted_line) = (Vec::new(), Vec::new(), Vec::new());
         for (&ranks, rs) in by {
             most_ranks = most_ranks.max(ranks);
             let wall = med(rs, &|s| f(s, &["wall_time_s"]));
@@ -1313,45 +1336,50 @@ fn many_ranks(runs: &[Run], out: &Path) {
                 f(&s["per_rank"][0], &["waiting_s"]) / f(s, &["wall_time_s"])
             });
             let largest = med(rs, &|s| f(s, &["distributed", "largest_group_share"]));
-            // The one-rank runs' bound on the group stage at this many
-            // ranks (`distributed.group_speedup_bound`), where given.
-            let group_bound = if ranks == 1 {
-                1.0
-            } else {
-                one.map_or(f64::NAN, |rs| {
-                    med(rs, &|s| {
-                        s["distributed"]["group_speedup_bound"]
-                            .as_array()
-                            .and_then(|bs| {
-                                bs.iter()
-                                    .find(|b| b["ranks"].as_u64() == Some(u64::from(ranks)))
-                            })
-                            .and_then(|b| b["speedup"].as_f64())
-                            .unwrap_or(f64::NAN)
+            // The one-rank runs' bounds on the group stage at this many
+            // ranks (`distributed.group_speedup_bound`, and with the event
+            // loops shared `event_shared_bound`) and their prediction of
+            // the whole run (`distributed.predicted`, with `--predict`),
+            // where given.
+            let at_ranks = |key: &str| {
+                if ranks == 1 {
+                    1.0
+                } else {
+                    one.map_or(f64::NAN, |rs| {
+                        med(rs, &|s| speedup_at(&s["distributed"][key], ranks))
                     })
-                })
+                }
             };
+            let group_bound = at_ranks("group_speedup_bound");
+            let shared_bound = at_ranks("event_shared_bound");
+            let predicted = at_ranks("predicted");
             let run_hashes: Vec<&str> = rs
                 .iter()
                 .filter_map(|r| r.s["state_hash"].as_str())
                 .collect();
             let _ = writeln!(
                 csv,
-                "{scene},{bodies},{ranks},{},{sim},{wall:e},{speedup:.4},{amdahl:.4},{:.4},{sent:.4},{waiting:.4},{largest:.4},{group_bound:.4},{}",
+                "{scene},{bodies},{ranks},{},{sim},{wall:e},{speedup:.4},{amdahl:.4},{:.4},{sent:.4},{waiting:.4},{largest:.4},{group_bound:.4},{shared_bound:.4},{predicted:.4},{}",
                 rs.len(),
                 speedup / ranks as f64,
                 run_hashes.join(" ")
             );
             let _ = writeln!(
                 md,
-                "| {ranks} | {} | {wall:.3} | {speedup:.2} | {amdahl:.2} | {:.0} % | {:.0} % | {:.0} % | {:.0} % | {group_bound:.2} |",
+                "| {ranks} | {} | {wall:.3} | {speedup:.2} | {} | {amdahl:.2} | {:.0} % | {:.0} % | {:.0} % | {:.0} % | {} | {} |",
                 rs.len(),
+                two_places(predicted),
                 100.0 * speedup / ranks as f64,
                 100.0 * sent,
                 100.0 * waiting,
-                100.0 * largest
+                100.0 * largest,
+                two_places(group_bound),
+                two_places(shared_bound)
             );
             line.push((ranks as f64, speedup));
+            if predicted.is_finite() {
+                predicted_line.push((ranks as f64, predicted));
+            }
             bound.push((ranks as f64, amdahl));
             per_sim.push((scene.clone(), (ranks as f64, wall / sim)));
         }
@@ -1361,6 +1389,13 @@ fn many_ranks(runs: &[Run], out: &Path) {
             points: line,
             thin: false,
         });
+        if !predicted_line.is_empty() {
+            predicted_lines.push(plot::Series {
+                label: format!("{scene}: predicted by one rank"),
+                points: predicted_line,
+                thin: true,
+            });
+        }
         bound_lines.push(plot::Series {
             label: format!("{scene}: Amdahl's bound (p = {p:.2})"),
             points: bound,
@@ -1370,6 +1405,7 @@ fn many_ranks(runs: &[Run], out: &Path) {
     std::fs::write(out.join("many_ranks.csv"), csv).expect("write many_ranks.csv");
     std::fs::write(out.join("many_ranks.md"), md).expect("write many_ranks.md");
     let mut speedup_series = measured;
+    speedup_series.extend(predicted_lines);
     speedup_series.extend(bound_lines);
     speedup_series.push(plot::Series {
         label: "ideal (R)".into(),
