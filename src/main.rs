@@ -128,7 +128,9 @@ struct RunArgs {
     force_distribute: bool,
     /// On one rank: time each task of the stages other ranks could take and
     /// predict the whole step on 2, 4, 8 and 16 ranks over the link below
-    /// (summary.json's `distributed.predicted`; costs about 1 % of the run).
+    /// (summary.json's `distributed.predicted`); on any number, time the
+    /// group steps' event loops (`distributed.event_shared_bound`). Costs
+    /// about 1.5 % of the run.
     #[arg(long)]
     predict: bool,
     /// The link --predict assumes: one-way latency in microseconds (default
@@ -500,6 +502,7 @@ fn run_options(cli: &RunArgs, live: bool) -> RunOptions {
         no_progress: cli.no_progress || live,
         no_sleep: cli.no_sleep,
         split_groups: cli.split_groups,
+        time_events: cli.predict,
         checkpoint_every: cli.checkpoint_every,
     }
 }

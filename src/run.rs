@@ -31,6 +31,8 @@ pub struct RunOptions {
     /// Split large interaction groups into the parts that interact within
     /// a step (`StepSettings::split_groups`).
     pub split_groups: bool,
+    /// Time the group steps' event loops (`StepSettings::time_events`).
+    pub time_events: bool,
     /// Write `checkpoint.bin` every this many simulated seconds (and at the end).
     pub checkpoint_every: Option<f64>,
 }
@@ -315,6 +317,7 @@ fn start_world(
             let mut world = World::new(scene);
             world.settings.sleep_enabled = !opts.no_sleep;
             world.settings.split_groups = opts.split_groups;
+            world.settings.time_events = opts.time_events;
             let traj = TrajectoryWriter::create(traj_path, marking)
                 .map_err(|e| io(e, "trajectory.csv"))?;
             (world, None, traj, Continued::New)
@@ -330,6 +333,7 @@ fn start_world(
             last_good = Some((ck.source().to_path_buf(), time));
             let mut world = World::restore(scene, ck).map_err(|e| RunError::Io(e.to_string()))?;
             world.settings.split_groups = opts.split_groups;
+            world.settings.time_events = opts.time_events;
             let (traj, continued) =
                 TrajectoryWriter::resume(traj_path, marks.trajectory, time, marking)
                     .map_err(|e| io(e, &traj_path.display().to_string()))?;

@@ -1108,8 +1108,7 @@ fn stalled_renderer_ends_the_job_after_the_results_are_written() {
 
 /// `summary.json` reports the parallel fraction p (the share of the wall
 /// time spent in stages other ranks can take) and the Amdahl bound
-/// 1 / (1 − p), and the group stage's bound on 2 to 16 ranks, groups whole
-/// and with their event loops shared; on the nuts
+/// 1 / (1 − p), and the group stage's bound on 2 to 16 ranks; on the nuts
 /// and bolts most of a rank's time is such work.
 #[test]
 fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
@@ -1167,9 +1166,15 @@ fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
         );
         last = s;
     }
-    // With each group's event loop shared along its critical path
-    // (`step::event_path`): never below the bound with groups whole (a
-    // loop's path is at most its work), at most R, growing with R.
+}
+
+/// The group stage's bound with each group's event loop shared along its
+/// critical path (`distributed.event_shared_bound`, `step::event_path`):
+/// never below the bound with groups whole (a loop's path is at most its
+/// work), at most R, growing with R; the loops hold at least one event at
+/// a time.
+fn check_event_shared_bound(d: &serde_json::Value) {
+    let bounds = d["group_speedup_bound"].as_array().unwrap();
     let shared = d["event_shared_bound"].as_array().unwrap();
     assert_eq!(shared.len(), bounds.len());
     let mut last = 1.0;
@@ -1195,7 +1200,8 @@ fn one_rank_reports_its_parallel_fraction_and_amdahl_bound() {
 /// the stages hold, and as many seconds as the run took at one rank. Over
 /// a link that costs nothing the stages are shared out (`--link-*` change
 /// no result). Runs on several ranks predict nothing (their tasks ran
-/// elsewhere), nor does a run without `--predict`.
+/// elsewhere), nor does a run without `--predict`. `--predict` also times
+/// the event loops, on any number of ranks (`check_event_shared_bound`).
 #[test]
 fn one_rank_predicts_the_whole_step_on_several_ranks() {
     let _one = one_at_a_time();
@@ -1209,6 +1215,7 @@ fn one_rank_predicts_the_whole_step_on_several_ranks() {
         &["--duration", "1.0", "--no-render", "--predict"],
     );
     let d = &lab.summary["distributed"];
+    check_event_shared_bound(d);
     let link = &d["prediction_link"];
     assert_eq!(link["latency_s"].as_f64(), Some(550e-6));
     assert_eq!(link["bytes_per_s"].as_f64(), Some(7.7e6));
@@ -1277,6 +1284,14 @@ fn one_rank_predicts_the_whole_step_on_several_ranks() {
         &nuts,
         &["--duration", "0.3", "--no-render"],
     );
+    // The workers time the groups they step as rank 0 does.
+    check_event_shared_bound(&two.summary["distributed"]);
+    let untimed = &plain.summary["distributed"];
+    assert_eq!(
+        untimed["event_shared_bound"].as_array().map(Vec::len),
+        Some(0)
+    );
+    assert_eq!(untimed["event_loop_parallelism"].as_f64(), Some(0.0));
     for r in [two, plain] {
         let predicted = &r.summary["distributed"]["predicted"];
         assert_eq!(predicted.as_array().map(Vec::len), Some(0));

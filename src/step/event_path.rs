@@ -15,10 +15,17 @@
 //!
 //! On as many ranks as the events could use, with messages free, no
 //! schedule ends the loop before that path does: the bound is optimistic.
+//! The loop is timed only where the run asks (`StepSettings::time_events`):
+//! a clock reading a search costs about 1 % on a machine whose clock is slow
+//! to read.
+
+use std::time::Instant;
 
 /// The loop's tasks so far, on their dependency path.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct EventPaths {
+    /// Whether the loop is timed at all.
+    timed: bool,
     /// When the last event that moved each body would end.
     moved: Vec<f64>,
     /// When the last task that read or moved each body would end.
@@ -30,18 +37,52 @@ pub(crate) struct EventPaths {
 }
 
 impl EventPaths {
-    /// A loop over `bodies` bodies, nothing done yet.
-    pub(crate) fn new(bodies: usize) -> Self {
+    /// A loop over `bodies` bodies, nothing done yet, timed or not.
+    pub(crate) fn new(bodies: usize, timed: bool) -> Self {
+        let n = if timed { bodies } else { 0 };
         EventPaths {
-            moved: vec![0.0; bodies],
-            read: vec![0.0; bodies],
+            timed,
+            moved: vec![0.0; n],
+            read: vec![0.0; n],
             ..Default::default()
+        }
+    }
+
+    /// Whether the loop is timed.
+    pub(crate) fn timed(&self) -> bool {
+        self.timed
+    }
+
+    /// A task's start, where the loop is timed.
+    pub(crate) fn start(&self) -> Option<Instant> {
+        self.timed.then(Instant::now)
+    }
+
+    /// A time-of-impact search of the pair of bodies `a` and `b`, started
+    /// at `started` (`start`; nothing where the loop is not timed).
+    pub(crate) fn search(&mut self, pair: (usize, usize), started: Option<Instant>) {
+        if let Some(t) = started {
+            self.search_took(pair, t.elapsed().as_secs_f64());
+        }
+    }
+
+    /// An event started at `started` (`start`), moving the bodies in
+    /// `moved` and reading those `read` gives (nothing where the loop is
+    /// not timed, and `read` is not called).
+    pub(crate) fn event(
+        &mut self,
+        moved: &[usize],
+        read: impl FnOnce() -> Vec<usize>,
+        started: Option<Instant>,
+    ) {
+        if let Some(t) = started {
+            self.event_took(moved, &read(), t.elapsed().as_secs_f64());
         }
     }
 
     /// A time-of-impact search of the pair of bodies `a` and `b` that took
     /// `s` seconds.
-    pub(crate) fn search(&mut self, (a, b): (usize, usize), s: f64) {
+    fn search_took(&mut self, (a, b): (usize, usize), s: f64) {
         let end = self.moved[a].max(self.moved[b]) + s;
         for i in [a, b] {
             self.read[i] = self.read[i].max(end);
@@ -51,7 +92,7 @@ impl EventPaths {
 
     /// An event that took `s` seconds, moving the bodies in `moved` and
     /// reading those in `read` (a body in both counts as moved).
-    pub(crate) fn event(&mut self, moved: &[usize], read: &[usize], s: f64) {
+    fn event_took(&mut self, moved: &[usize], read: &[usize], s: f64) {
         let after_moves = read
             .iter()
             .chain(moved)
@@ -91,45 +132,54 @@ mod tests {
 
     #[test]
     fn events_of_separate_bodies_run_side_by_side() {
-        let mut p = EventPaths::new(4);
-        p.event(&[0, 1], &[], 2.0);
-        p.event(&[2, 3], &[], 3.0);
+        let mut p = EventPaths::new(4, true);
+        p.event_took(&[0, 1], &[], 2.0);
+        p.event_took(&[2, 3], &[], 3.0);
         assert_eq!(p.work_s(), 5.0);
         assert_eq!(p.path_s(), 3.0);
     }
 
     #[test]
     fn events_sharing_a_body_run_in_turn() {
-        let mut p = EventPaths::new(3);
-        p.event(&[0, 1], &[], 2.0);
-        p.event(&[1, 2], &[], 3.0);
+        let mut p = EventPaths::new(3, true);
+        p.event_took(&[0, 1], &[], 2.0);
+        p.event_took(&[1, 2], &[], 3.0);
         assert_eq!(p.path_s(), 5.0);
     }
 
     #[test]
     fn a_search_waits_for_the_move_and_the_next_move_for_the_search() {
-        let mut p = EventPaths::new(4);
-        p.event(&[0], &[], 1.0);
+        let mut p = EventPaths::new(4, true);
+        p.event_took(&[0], &[], 1.0);
         // Reads body 0 after its move; body 3 is free.
-        p.search((0, 3), 0.5);
+        p.search_took((0, 3), 0.5);
         assert_eq!(p.path_s(), 1.5);
         // Moving 3 waits for the search that read it.
-        p.event(&[3], &[], 1.0);
+        p.event_took(&[3], &[], 1.0);
         assert_eq!(p.path_s(), 2.5);
         // A search of untouched bodies starts at once.
-        p.search((1, 2), 0.25);
+        p.search_took((1, 2), 0.25);
         assert_eq!(p.path_s(), 2.5);
         assert_eq!(p.work_s(), 2.75);
     }
 
     #[test]
     fn reads_share_a_body_but_a_move_waits_for_them() {
-        let mut p = EventPaths::new(3);
-        p.event(&[0], &[2], 1.0);
-        p.event(&[1], &[2], 1.0);
+        let mut p = EventPaths::new(3, true);
+        p.event_took(&[0], &[2], 1.0);
+        p.event_took(&[1], &[2], 1.0);
         assert_eq!(p.path_s(), 1.0, "two readers of body 2 run side by side");
-        p.event(&[2], &[], 1.0);
+        p.event_took(&[2], &[], 1.0);
         assert_eq!(p.path_s(), 2.0);
         assert_eq!(p.work_s(), 3.0);
+    }
+
+    #[test]
+    fn an_untimed_loop_records_nothing() {
+        let mut p = EventPaths::new(3, false);
+        assert!(!p.timed() && p.start().is_none());
+        p.search((0, 1), p.start());
+        p.event(&[0], || unreachable!("read sets are not built"), None);
+        assert_eq!((p.work_s(), p.path_s()), (0.0, 0.0));
     }
 }

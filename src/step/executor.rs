@@ -190,7 +190,9 @@ pub struct GroupOutput {
     pub(crate) busy_s: f64,
     /// Of those, the seconds of its event loop's searches and events, and
     /// their critical path through the bodies each reads and moves
-    /// (`event_path::EventPaths`): what the loop would take shared.
+    /// (`event_path::EventPaths`): what the loop would take shared. Zero
+    /// unless `events_timed` (`StepSettings::time_events`).
+    pub(crate) events_timed: bool,
     pub(crate) event_work_s: f64,
     pub(crate) event_path_s: f64,
     /// V-Clip tasks of its first stage run beforehand (`PreparedPairs`):
@@ -207,6 +209,7 @@ impl GroupOutput {
     /// Its seconds as the step's group work counts them.
     pub fn seconds(&self) -> GroupSeconds {
         GroupSeconds {
+            events_timed: self.events_timed,
             busy_s: self.busy_s,
             event_work_s: self.event_work_s,
             event_path_s: self.event_path_s,

@@ -15,7 +15,6 @@ use crate::collision::broadphase::SphereProxy;
 use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
 use std::collections::{BTreeMap, BTreeSet};
-use std::time::Instant;
 
 /// Impact events one body may take part in during a step (as one of an
 /// impact's two bodies) before the overlaps left on its pairs are accepted.
@@ -209,10 +208,10 @@ impl PairBook {
             if accepted.contains(&k) {
                 continue;
             }
-            let clock = Instant::now();
+            let started = deps.start();
             let r = &self.results[&k];
             let search = g.begin_time_of_impact(PairAsk { k, r, seg, since }, h);
-            deps.search(bodies_of(k), clock.elapsed().as_secs_f64());
+            deps.search(bodies_of(k), started);
             self.wait_or_find(k, search);
         }
         loop {
@@ -231,9 +230,9 @@ impl PairBook {
                 .searches
                 .remove(&k)
                 .expect("every waiting pair has its search");
-            let clock = Instant::now();
+            let started = deps.start();
             let search = g.continue_search(search, seg, limit);
-            deps.search(bodies_of(k), clock.elapsed().as_secs_f64());
+            deps.search(bodies_of(k), started);
             self.wait_or_find(k, search);
         }
         self.queue.first().map(|&(t, k)| (k, t.0))
@@ -507,7 +506,7 @@ impl EventLoop {
             last_of: vec![None; n],
             timer,
             prepared_tasks,
-            deps: EventPaths::new(n),
+            deps: EventPaths::new(n, g.st.step_settings.time_events),
         }
     }
 
@@ -526,36 +525,41 @@ impl EventLoop {
                 spin_resolve,
             } => (pair, tau, spin_resolve),
         };
-        let clock = Instant::now();
+        let started = self.deps.start();
         let Some(impact) = self.impact_at(g, exec, pair, tau, spin_resolve) else {
             return Ok(true);
         };
         let pair = impact.pair;
         let world_event = ((g.ids[pair.0 as usize], g.ids[pair.1 as usize]), impact.tau);
         let own = dynamic_bodies(g, pair);
-        let mut read: Vec<usize> = impact
-            .pairs
-            .iter()
-            .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
-            .collect();
+        // What the event read: the bodies of its impact group's pairs.
+        let read_at_tau = |impact: &Impact| -> Vec<usize> {
+            impact
+                .pairs
+                .iter()
+                .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
+                .collect()
+        };
         if !own.is_empty() && own.iter().all(|&i| self.last_of[i] == Some(world_event)) {
             // No progress: keep the small overlap rather than stall the step.
             self.accept(g, pair);
-            self.deps.event(&[], &read, clock.elapsed().as_secs_f64());
+            self.deps.event(&[], || read_at_tau(&impact), started);
             return Ok(true);
         }
         self.count_event(g, &impact, spin_resolve, &own);
         self.roll_back(g, &impact);
         let members = self.solve_at_impact(g, exec, &impact, &own, world_event)?;
-        read.extend(self.retest_moved(g, exec, &members));
-        let moved: Vec<usize> = impact
-            .states
-            .iter()
-            .map(|&(i, _)| i)
-            .chain(members)
-            .collect();
-        self.deps
-            .event(&moved, &read, clock.elapsed().as_secs_f64());
+        let tested = self.retest_moved(g, exec, &members);
+        if self.deps.timed() {
+            let moved: Vec<usize> = impact
+                .states
+                .iter()
+                .map(|&(i, _)| i)
+                .chain(members)
+                .collect();
+            let read = || read_at_tau(&impact).into_iter().chain(tested).collect();
+            self.deps.event(&moved, read, started);
+        }
         Ok(true)
     }
 
@@ -857,6 +861,7 @@ impl EventLoop {
             pieces: self.pieces.pieces,
             busy_s: 0.0,
             prepared_tasks: self.prepared_tasks,
+            events_timed: self.deps.timed(),
             event_work_s: self.deps.work_s(),
             event_path_s: self.deps.path_s(),
         }

@@ -43,6 +43,10 @@ pub struct StepSettings {
     /// (`--capture-islands`); `None` (the default): none is kept. Changes
     /// no result.
     pub capture_min_rows: Option<usize>,
+    /// Times each group's event loop, its events and searches, for
+    /// `distributed.event_shared_bound` (`step::event_path`; with
+    /// `--predict`). Changes no result; costs a clock reading a search.
+    pub time_events: bool,
 }
 
 impl Default for StepSettings {
@@ -56,6 +60,7 @@ impl Default for StepSettings {
             group_margin: GROUP_MARGIN,
             split_groups: false,
             capture_min_rows: None,
+            time_events: false,
         }
     }
 }

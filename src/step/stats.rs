@@ -266,11 +266,13 @@ pub struct Distribution {
     /// its time outside the loop plus the loop's critical path through the
     /// bodies its events and searches read and move
     /// (`step::event_path`), every event on a rank of its own as soon as
-    /// what it depends on has ended, messages free.
+    /// what it depends on has ended, messages free. Only where the loops
+    /// were timed (`--predict`); empty otherwise.
     #[serde(default)]
     pub event_shared_bound: Vec<RankBound>,
     /// The event loops' seconds over their critical paths, summed over
-    /// the groups and steps: how many events at a time the loops hold.
+    /// the groups and steps: how many events at a time the loops hold
+    /// (0 where they were not timed).
     #[serde(default)]
     pub event_loop_parallelism: f64,
     /// The whole step on R ranks, for R in `BOUND_RANKS`, predicted from
@@ -328,7 +330,9 @@ pub struct GroupWork {
     pub bound_seconds: [f64; BOUND_RANKS.len()],
     /// The same with each group's event loop shared (`GroupOutput::shared_s`).
     pub shared_bound_seconds: [f64; BOUND_RANKS.len()],
-    /// The event loops' seconds and critical paths, summed.
+    /// Whether the event loops were timed (`StepSettings::time_events`),
+    /// and their seconds and critical paths, summed.
+    pub events_timed: bool,
     pub event_work_s: f64,
     pub event_path_s: f64,
 }
@@ -349,6 +353,7 @@ impl GroupWork {
             all += g.busy_s;
             largest = largest.max(g.busy_s);
             longest_shared = longest_shared.max(g.busy_s - g.event_work_s + g.event_path_s);
+            self.events_timed |= g.events_timed;
             self.event_work_s += g.event_work_s;
             self.event_path_s += g.event_path_s;
         }
@@ -365,6 +370,8 @@ impl GroupWork {
 /// One group step's seconds, as `GroupWork::add_step` takes them.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GroupSeconds {
+    /// Whether its event loop was timed (else the two below are 0).
+    pub events_timed: bool,
     /// The whole step where it ran.
     pub busy_s: f64,
     /// Its event loop's searches and events (part of `busy_s`).
@@ -391,12 +398,14 @@ impl Distribution {
         self.parallel_fraction = p;
         self.amdahl_bound = 1.0 / (1.0 - p).max(1e-6);
         self.group_speedup_bound = rank_bounds(groups.seconds, &groups.bound_seconds);
-        self.event_shared_bound = rank_bounds(groups.seconds, &groups.shared_bound_seconds);
-        self.event_loop_parallelism = if groups.event_path_s > 0.0 {
-            groups.event_work_s / groups.event_path_s
-        } else {
-            1.0
-        };
+        if groups.events_timed {
+            self.event_shared_bound = rank_bounds(groups.seconds, &groups.shared_bound_seconds);
+            self.event_loop_parallelism = if groups.event_path_s > 0.0 {
+                groups.event_work_s / groups.event_path_s
+            } else {
+                1.0
+            };
+        }
     }
 }
 
