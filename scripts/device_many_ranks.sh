@@ -94,6 +94,10 @@ case "${1:-}" in
     fi
     opened=$(cat "$log".ld.* | grep -c "calling init: $pack_dir/root" || true)
     rm -f "$log" "$log".ld.*
+    if [ "${opened:-0}" -eq 0 ]; then
+      echo "device_many_ranks: no library was opened from .ompi/root" >&2
+      exit 1
+    fi
     echo "device_many_ranks: check passed ($opened libraries opened from .ompi/root)"
     ;;
   *)
