@@ -33,7 +33,8 @@ packages=(openmpi-bin openmpi-common libopenmpi3 libpmix2 libevent-core-2.1-7
   libnl-route-3-200 libnuma1 libmunge2 libudev1 libuuid1 libatomic1)
 
 pack() {
-  rm -rf "$pack_dir/debs"
+  # Only what travels: the packages and the build (about 21 MB).
+  rm -rf "$pack_dir/debs" "$pack_dir/root" "$pack_dir/bin"
   mkdir -p "$pack_dir/debs"
   (cd "$pack_dir/debs" && apt-get download "${packages[@]}" >/dev/null)
   cargo build --release --quiet
@@ -98,6 +99,8 @@ case "${1:-}" in
       echo "device_many_ranks: no library was opened from .ompi/root" >&2
       exit 1
     fi
+    # What was unpacked does not travel (`pack` leaves it out too).
+    rm -rf "$pack_dir/root" "$pack_dir/bin"
     echo "device_many_ranks: check passed ($opened libraries opened from .ompi/root)"
     ;;
   *)
