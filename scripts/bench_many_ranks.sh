@@ -96,7 +96,8 @@ if [ "${PREDICT:-0}" = 1 ] && [ "$cores" -ge 2 ]; then
     --no-progress --out "$tmp/probe" >/dev/null 2>&1
   number() { grep -o "\"$1\": *[0-9.e+-]*" "$tmp/probe/summary.json" | tail -1 | sed 's/.*: *//'; }
   latency=$(number message_latency_s); rate=$(number link_bytes_per_s)
-  latency_us=$(awk -v s="$latency" 'BEGIN { printf "%.3f", s * 1e6 }')
+  # `message_latency_s` is a round trip.
+  latency_us=$(awk -v s="$latency" 'BEGIN { printf "%.3f", s * 1e6 / 2 }')
   echo "bench_many_ranks: predicting over the link measured: $latency_us µs one way, $rate B/s"
   predict_args=(--predict --link-latency-us "$latency_us" --link-bytes-per-s "$rate")
 fi

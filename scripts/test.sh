@@ -118,6 +118,7 @@ check "bench_peer --tiny" bash scripts/bench_peer.sh --tiny
 check "bench_pour --tiny" bash scripts/bench_pour.sh --tiny
 check "bench_dial --tiny" bash scripts/bench_dial.sh --tiny
 check "bench_many_ranks --tiny" bash scripts/bench_many_ranks.sh --tiny
+check "bench_predict --tiny" bash scripts/bench_predict.sh --tiny
 check "device_many_ranks check (Open MPI from .ompi alone)" bash scripts/device_many_ranks.sh check
 check "bench_instructions --tiny" bash scripts/bench_instructions.sh --tiny
 check "cargo bench broadphase/vclip/lcp compile and run" bash -c "cargo bench --quiet --bench broadphase -- --tiny >/dev/null"
