@@ -794,7 +794,8 @@ impl EventLoop {
 
     /// The members' new paths may reach new bodies of the group: their
     /// pairs are found and tested again; every other pair stands. Returns
-    /// the bodies of the pairs tested (each of a pair's two).
+    /// the bodies of the pairs tested (each of a pair's two) where the
+    /// loop is timed, else nothing.
     fn retest_moved(
         &mut self,
         g: &mut Region,
@@ -810,10 +811,13 @@ impl EventLoop {
         g.counters.candidate_pairs += redo.len() as u64;
         g.stage.stop(broadphase);
         let redone = g.narrowphase_skipping_separating(exec, &redo, &self.end, &self.separating);
-        let tested = redo
-            .iter()
-            .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
-            .collect();
+        let tested = if self.deps.timed() {
+            redo.iter()
+                .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
+                .collect()
+        } else {
+            Vec::new()
+        };
         for (k, r) in redo.into_iter().zip(redone) {
             self.book.insert(k, r);
         }
