@@ -19,6 +19,7 @@
 //! a clock reading a search costs about 1 % on a machine whose clock is slow
 //! to read.
 
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 /// The loop's tasks so far, on their dependency path.
@@ -48,11 +49,6 @@ impl EventPaths {
         }
     }
 
-    /// Whether the loop is timed.
-    pub(crate) fn timed(&self) -> bool {
-        self.timed
-    }
-
     /// A task's start, where the loop is timed.
     pub(crate) fn start(&self) -> Option<Instant> {
         self.timed.then(Instant::now)
@@ -66,17 +62,17 @@ impl EventPaths {
         }
     }
 
-    /// An event started at `started` (`start`), moving the bodies in
-    /// `moved` and reading those `read` gives (nothing where the loop is
-    /// not timed, and `read` is not called).
+    /// An event started at `started` (`start`), moving and reading the
+    /// bodies `bodies` gives (nothing where the loop is not timed, and
+    /// `bodies` is not called).
     pub(crate) fn event(
         &mut self,
-        moved: &[usize],
-        read: impl FnOnce() -> Vec<usize>,
         started: Option<Instant>,
+        bodies: impl FnOnce() -> (Vec<usize>, Vec<usize>),
     ) {
         if let Some(t) = started {
-            self.event_took(moved, &read(), t.elapsed().as_secs_f64());
+            let (moved, read) = bodies();
+            self.event_took(&moved, &read, t.elapsed().as_secs_f64());
         }
     }
 
@@ -115,14 +111,32 @@ impl EventPaths {
         self.path_s = self.path_s.max(end);
     }
 
-    /// The loop's tasks' seconds, summed.
-    pub(crate) fn work_s(&self) -> f64 {
-        self.work_s
+    /// The loop's seconds and critical path, where it was timed.
+    pub(crate) fn seconds(&self) -> Option<LoopSeconds> {
+        self.timed.then_some(LoopSeconds {
+            work_s: self.work_s,
+            path_s: self.path_s,
+        })
     }
+}
 
-    /// The loop's critical path in seconds (at most `work_s`).
-    pub(crate) fn path_s(&self) -> f64 {
-        self.path_s
+/// A timed event loop's seconds (`EventPaths::seconds`), or the sum of
+/// several.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoopSeconds {
+    /// Its searches' and events' seconds, summed.
+    pub work_s: f64,
+    /// Their critical path (at most `work_s`).
+    pub path_s: f64,
+}
+
+impl LoopSeconds {
+    /// `self` and `other` summed.
+    pub fn plus(self, other: LoopSeconds) -> LoopSeconds {
+        LoopSeconds {
+            work_s: self.work_s + other.work_s,
+            path_s: self.path_s + other.path_s,
+        }
     }
 }
 
@@ -135,8 +149,8 @@ mod tests {
         let mut p = EventPaths::new(4, true);
         p.event_took(&[0, 1], &[], 2.0);
         p.event_took(&[2, 3], &[], 3.0);
-        assert_eq!(p.work_s(), 5.0);
-        assert_eq!(p.path_s(), 3.0);
+        assert_eq!(p.work_s, 5.0);
+        assert_eq!(p.path_s, 3.0);
     }
 
     #[test]
@@ -144,7 +158,7 @@ mod tests {
         let mut p = EventPaths::new(3, true);
         p.event_took(&[0, 1], &[], 2.0);
         p.event_took(&[1, 2], &[], 3.0);
-        assert_eq!(p.path_s(), 5.0);
+        assert_eq!(p.path_s, 5.0);
     }
 
     #[test]
@@ -153,14 +167,14 @@ mod tests {
         p.event_took(&[0], &[], 1.0);
         // Reads body 0 after its move; body 3 is free.
         p.search_took((0, 3), 0.5);
-        assert_eq!(p.path_s(), 1.5);
+        assert_eq!(p.path_s, 1.5);
         // Moving 3 waits for the search that read it.
         p.event_took(&[3], &[], 1.0);
-        assert_eq!(p.path_s(), 2.5);
+        assert_eq!(p.path_s, 2.5);
         // A search of untouched bodies starts at once.
         p.search_took((1, 2), 0.25);
-        assert_eq!(p.path_s(), 2.5);
-        assert_eq!(p.work_s(), 2.75);
+        assert_eq!(p.path_s, 2.5);
+        assert_eq!(p.work_s, 2.75);
     }
 
     #[test]
@@ -168,18 +182,19 @@ mod tests {
         let mut p = EventPaths::new(3, true);
         p.event_took(&[0], &[2], 1.0);
         p.event_took(&[1], &[2], 1.0);
-        assert_eq!(p.path_s(), 1.0, "two readers of body 2 run side by side");
+        assert_eq!(p.path_s, 1.0, "two readers of body 2 run side by side");
         p.event_took(&[2], &[], 1.0);
-        assert_eq!(p.path_s(), 2.0);
-        assert_eq!(p.work_s(), 3.0);
+        assert_eq!(p.path_s, 2.0);
+        assert_eq!(p.work_s, 3.0);
     }
 
     #[test]
     fn an_untimed_loop_records_nothing() {
         let mut p = EventPaths::new(3, false);
-        assert!(!p.timed() && p.start().is_none());
+        assert!(!p.timed && p.start().is_none());
         p.search((0, 1), p.start());
-        p.event(&[0], || unreachable!("read sets are not built"), None);
-        assert_eq!((p.work_s(), p.path_s()), (0.0, 0.0));
+        p.event(None, || unreachable!("read sets are not built"));
+        assert_eq!((p.work_s, p.path_s), (0.0, 0.0));
+        assert_eq!(p.seconds(), None);
     }
 }

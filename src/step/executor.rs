@@ -11,6 +11,7 @@
 //! `settings`, `touching`): every stage can take an `Executor` without the
 //! seam importing the stages back.
 
+use super::event_path::LoopSeconds;
 use super::settings::StepSettings;
 use super::stats::{Counters, Distribution, GroupSeconds, NumericalFailure, RankSummary};
 use super::timers::{Stage, StageSeconds};
@@ -190,11 +191,9 @@ pub struct GroupOutput {
     pub(crate) busy_s: f64,
     /// Of those, the seconds of its event loop's searches and events, and
     /// their critical path through the bodies each reads and moves
-    /// (`event_path::EventPaths`): what the loop would take shared. Zero
-    /// unless `events_timed` (`StepSettings::time_events`).
-    pub(crate) events_timed: bool,
-    pub(crate) event_work_s: f64,
-    pub(crate) event_path_s: f64,
+    /// (`event_path::EventPaths`): what the loop would take shared. `None`
+    /// unless the loop was timed (`StepSettings::time_events`).
+    pub(crate) event_loop: Option<LoopSeconds>,
     /// V-Clip tasks of its first stage run beforehand (`PreparedPairs`):
     /// in `counters`, but counted where they ran.
     pub(crate) prepared_tasks: u64,
@@ -209,10 +208,8 @@ impl GroupOutput {
     /// Its seconds as the step's group work counts them.
     pub fn seconds(&self) -> GroupSeconds {
         GroupSeconds {
-            events_timed: self.events_timed,
             busy_s: self.busy_s,
-            event_work_s: self.event_work_s,
-            event_path_s: self.event_path_s,
+            event_loop: self.event_loop,
         }
     }
 

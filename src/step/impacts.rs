@@ -412,6 +412,11 @@ fn bodies_of((a, b): PairKey) -> (usize, usize) {
     (a as usize, b as usize)
 }
 
+/// The bodies of `pairs`, each pair's two.
+fn bodies_of_pairs(pairs: &[PairKey]) -> impl Iterator<Item = usize> + '_ {
+    pairs.iter().flat_map(|&(a, b)| [a as usize, b as usize])
+}
+
 /// The dynamic bodies of `pair`.
 fn dynamic_bodies(g: &Region, (a, b): PairKey) -> Vec<usize> {
     [a as usize, b as usize]
@@ -532,34 +537,25 @@ impl EventLoop {
         let pair = impact.pair;
         let world_event = ((g.ids[pair.0 as usize], g.ids[pair.1 as usize]), impact.tau);
         let own = dynamic_bodies(g, pair);
-        // What the event read: the bodies of its impact group's pairs.
-        let read_at_tau = |impact: &Impact| -> Vec<usize> {
-            impact
-                .pairs
-                .iter()
-                .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
-                .collect()
-        };
         if !own.is_empty() && own.iter().all(|&i| self.last_of[i] == Some(world_event)) {
             // No progress: keep the small overlap rather than stall the step.
             self.accept(g, pair);
-            self.deps.event(&[], || read_at_tau(&impact), started);
+            // It read the bodies of its impact group's pairs.
+            let read = || (Vec::new(), bodies_of_pairs(&impact.pairs).collect());
+            self.deps.event(started, read);
             return Ok(true);
         }
         self.count_event(g, &impact, spin_resolve, &own);
         self.roll_back(g, &impact);
         let members = self.solve_at_impact(g, exec, &impact, &own, world_event)?;
-        let tested = self.retest_moved(g, exec, &members);
-        if self.deps.timed() {
-            let moved: Vec<usize> = impact
-                .states
-                .iter()
-                .map(|&(i, _)| i)
-                .chain(members)
-                .collect();
-            let read = || read_at_tau(&impact).into_iter().chain(tested).collect();
-            self.deps.event(&moved, read, started);
-        }
+        let retested = self.retest_moved(g, exec, &members);
+        // It moved what it rolled back or woke, and read the bodies of its
+        // impact group's pairs and of the pairs it tested again.
+        self.deps.event(started, || {
+            let rolled = impact.states.iter().map(|&(i, _)| i);
+            let read = bodies_of_pairs(&impact.pairs).chain(bodies_of_pairs(&retested));
+            (rolled.chain(members).collect(), read.collect())
+        });
         Ok(true)
     }
 
@@ -794,14 +790,13 @@ impl EventLoop {
 
     /// The members' new paths may reach new bodies of the group: their
     /// pairs are found and tested again; every other pair stands. Returns
-    /// the bodies of the pairs tested (each of a pair's two) where the
-    /// loop is timed, else nothing.
+    /// the pairs tested.
     fn retest_moved(
         &mut self,
         g: &mut Region,
         exec: &mut dyn Executor,
         members: &[usize],
-    ) -> Vec<usize> {
+    ) -> Vec<PairKey> {
         let broadphase = g.stage.start(Stage::Broadphase);
         for &i in members {
             self.book.forget(i);
@@ -811,17 +806,10 @@ impl EventLoop {
         g.counters.candidate_pairs += redo.len() as u64;
         g.stage.stop(broadphase);
         let redone = g.narrowphase_skipping_separating(exec, &redo, &self.end, &self.separating);
-        let tested = if self.deps.timed() {
-            redo.iter()
-                .flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
-                .collect()
-        } else {
-            Vec::new()
-        };
-        for (k, r) in redo.into_iter().zip(redone) {
+        for (&k, r) in redo.iter().zip(redone) {
             self.book.insert(k, r);
         }
-        tested
+        redo
     }
 
     /// The group's output once no event is left: the region's state moves
@@ -865,9 +853,7 @@ impl EventLoop {
             pieces: self.pieces.pieces,
             busy_s: 0.0,
             prepared_tasks: self.prepared_tasks,
-            events_timed: self.deps.timed(),
-            event_work_s: self.deps.work_s(),
-            event_path_s: self.deps.path_s(),
+            event_loop: self.deps.seconds(),
         }
     }
 }

@@ -4,6 +4,7 @@
 //! (`check_states`). A leaf module: `step` fills these in and `output`
 //! writes them.
 
+use super::event_path::LoopSeconds;
 use crate::body::{BodyId, BodyState};
 use crate::contact::solver::SolveStats;
 use crate::scene::bounds::MAX_SPEED;
@@ -328,13 +329,11 @@ pub struct GroupWork {
     pub largest_seconds: f64,
     /// For each of `BOUND_RANKS`, the steps' max(largest group, all / R).
     pub bound_seconds: [f64; BOUND_RANKS.len()],
-    /// The same with each group's event loop shared (`GroupOutput::shared_s`).
+    /// The same with each group's event loop shared (`GroupSeconds::shared_s`).
     pub shared_bound_seconds: [f64; BOUND_RANKS.len()],
-    /// Whether the event loops were timed (`StepSettings::time_events`),
-    /// and their seconds and critical paths, summed.
-    pub events_timed: bool,
-    pub event_work_s: f64,
-    pub event_path_s: f64,
+    /// The event loops' seconds and critical paths, summed, where they were
+    /// timed (`StepSettings::time_events`).
+    pub event_loops: Option<LoopSeconds>,
 }
 
 impl GroupWork {
@@ -352,10 +351,10 @@ impl GroupWork {
         for g in groups {
             all += g.busy_s;
             largest = largest.max(g.busy_s);
-            longest_shared = longest_shared.max(g.busy_s - g.event_work_s + g.event_path_s);
-            self.events_timed |= g.events_timed;
-            self.event_work_s += g.event_work_s;
-            self.event_path_s += g.event_path_s;
+            longest_shared = longest_shared.max(g.shared_s());
+            if let Some(l) = g.event_loop {
+                self.event_loops = Some(self.event_loops.unwrap_or_default().plus(l));
+            }
         }
         self.seconds += all;
         self.largest_seconds += largest;
@@ -370,14 +369,20 @@ impl GroupWork {
 /// One group step's seconds, as `GroupWork::add_step` takes them.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GroupSeconds {
-    /// Whether its event loop was timed (else the two below are 0).
-    pub events_timed: bool,
     /// The whole step where it ran.
     pub busy_s: f64,
-    /// Its event loop's searches and events (part of `busy_s`).
-    pub event_work_s: f64,
-    /// Their critical path (`step::event_path`).
-    pub event_path_s: f64,
+    /// Its event loop's searches and events (part of `busy_s`) and their
+    /// critical path (`step::event_path`), where the loop was timed.
+    pub event_loop: Option<LoopSeconds>,
+}
+
+impl GroupSeconds {
+    /// The step with its event loop shared: its time outside the loop
+    /// plus the loop's critical path (the whole step where not timed).
+    fn shared_s(&self) -> f64 {
+        self.event_loop
+            .map_or(self.busy_s, |l| self.busy_s - l.work_s + l.path_s)
+    }
 }
 
 impl Distribution {
@@ -398,10 +403,10 @@ impl Distribution {
         self.parallel_fraction = p;
         self.amdahl_bound = 1.0 / (1.0 - p).max(1e-6);
         self.group_speedup_bound = rank_bounds(groups.seconds, &groups.bound_seconds);
-        if groups.events_timed {
+        if let Some(loops) = groups.event_loops {
             self.event_shared_bound = rank_bounds(groups.seconds, &groups.shared_bound_seconds);
-            self.event_loop_parallelism = if groups.event_path_s > 0.0 {
-                groups.event_work_s / groups.event_path_s
+            self.event_loop_parallelism = if loops.path_s > 0.0 {
+                loops.work_s / loops.path_s
             } else {
                 1.0
             };
