@@ -119,6 +119,19 @@ for scene in scenes:
     hashes = {s["state_hash"] for s in one + two}
     print(f"| {scene} | {n} | {w1:.2f} | {w2:.2f} | {w2 / w1:.3f} | {pred:.3f} | "
           f"{(pred - w2 / w1) / (w2 / w1) * 100:+.0f} % | {', '.join(sorted(hashes))} |")
+print("\n## What the predicted wall is made of, over shared memory (`by_stage`)\n")
+print("Seconds of the one-rank run's prediction: rank 0's own (everything outside "
+      "the stages other ranks take) and each stage as the scheduler would share it.\n")
+print("| scene | ranks | predicted [s] | rank 0's own | island solves | group steps | first stage of split groups | narrowphase |")
+print("|---|---|---|---|---|---|---|---|")
+for scene in scenes:
+    for p in load(f"{scene}-shm-1")["distributed"]["predicted"]:
+        b = p.get("by_stage")
+        if b is None or p["ranks"] not in (2, 16):
+            continue
+        print(f"| {scene} | {p['ranks']} | {p['wall_s']:.3f} | {b['coordinator_s']:.3f} | "
+              f"{b['island_solves_s']:.3f} | {b['group_steps_s']:.3f} | {b['prepare_pairs_s']:.3f} | "
+              f"{b['narrowphase_s']:.3f} |")
 print("\n## Predicted over a lab's 100 Mbit/s (the default link)\n")
 print("| scene | groups | 1 rank [s] | 2 ranks | 4 | 8 | 16 | largest group's share | group-stage bound at 16 | the same, events shared | state hash |")
 print("|---|---|---|---|---|---|---|---|---|---|---|")

@@ -15,7 +15,9 @@
 use super::scatter::{CHUNK_SHARE, COORDINATOR_SHARE};
 use super::schedule;
 use crate::step::profile::{StageCall, StageKind, StepProfile, StepSink, TaskCost};
-use crate::step::stats::{BOUND_RANKS, Distribution, PredictedRanks, PredictionLink};
+use crate::step::stats::{
+    BOUND_RANKS, Distribution, PredictedRanks, PredictedStages, PredictionLink,
+};
 
 /// The link the prediction assumes between rank 0 and each worker.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -39,7 +41,7 @@ impl LinkModel {
 pub struct Prediction {
     link: LinkModel,
     one_rank_s: f64,
-    predicted_s: [f64; BOUND_RANKS.len()],
+    predicted: [PredictedStages; BOUND_RANKS.len()],
     worst_step_s: [f64; BOUND_RANKS.len()],
 }
 
@@ -48,7 +50,7 @@ impl Prediction {
         Prediction {
             link,
             one_rank_s: 0.0,
-            predicted_s: [0.0; BOUND_RANKS.len()],
+            predicted: [PredictedStages::default(); BOUND_RANKS.len()],
             worst_step_s: [0.0; BOUND_RANKS.len()],
         }
     }
@@ -58,16 +60,19 @@ impl StepSink for Prediction {
     fn step(&mut self, profile: &StepProfile) {
         let own = (profile.wall_s - profile.stage_seconds()).max(0.0);
         self.one_rank_s += profile.wall_s;
-        let mut step_s = [own; BOUND_RANKS.len()];
+        let mut step = [PredictedStages {
+            coordinator_s: own,
+            ..Default::default()
+        }; BOUND_RANKS.len()];
         for call in &profile.stages {
             let best = stage_s_up_to(call, MOST_RANKS, &self.link);
-            for (s, &ranks) in step_s.iter_mut().zip(&BOUND_RANKS) {
-                *s += best[ranks as usize - 1];
+            for (s, &ranks) in step.iter_mut().zip(&BOUND_RANKS) {
+                *stage_entry(s, call.kind) += best[ranks as usize - 1];
             }
         }
-        for (i, s) in step_s.into_iter().enumerate() {
-            self.predicted_s[i] += s;
-            self.worst_step_s[i] = self.worst_step_s[i].max(s);
+        for (i, s) in step.iter().enumerate() {
+            add_stages(&mut self.predicted[i], s);
+            self.worst_step_s[i] = self.worst_step_s[i].max(s.total_s());
         }
     }
 
@@ -79,18 +84,40 @@ impl StepSink for Prediction {
         distribution.predicted = BOUND_RANKS
             .iter()
             .enumerate()
-            .map(|(i, &ranks)| PredictedRanks {
-                ranks,
-                wall_s: self.predicted_s[i],
-                speedup: if self.predicted_s[i] > 0.0 {
-                    self.one_rank_s / self.predicted_s[i]
-                } else {
-                    1.0
-                },
-                worst_step_s: self.worst_step_s[i],
+            .map(|(i, &ranks)| {
+                let wall_s = self.predicted[i].total_s();
+                PredictedRanks {
+                    ranks,
+                    wall_s,
+                    speedup: if wall_s > 0.0 {
+                        self.one_rank_s / wall_s
+                    } else {
+                        1.0
+                    },
+                    worst_step_s: self.worst_step_s[i],
+                    by_stage: self.predicted[i],
+                }
             })
             .collect();
     }
+}
+
+/// Where a stage call's predicted seconds count.
+fn stage_entry(stages: &mut PredictedStages, kind: StageKind) -> &mut f64 {
+    match kind {
+        StageKind::Narrowphase => &mut stages.narrowphase_s,
+        StageKind::IslandSolves => &mut stages.island_solves_s,
+        StageKind::GroupSteps => &mut stages.group_steps_s,
+        StageKind::PreparePairs => &mut stages.prepare_pairs_s,
+    }
+}
+
+fn add_stages(sum: &mut PredictedStages, step: &PredictedStages) {
+    sum.coordinator_s += step.coordinator_s;
+    sum.narrowphase_s += step.narrowphase_s;
+    sum.island_solves_s += step.island_solves_s;
+    sum.group_steps_s += step.group_steps_s;
+    sum.prepare_pairs_s += step.prepare_pairs_s;
 }
 
 /// The most ranks predicted.
@@ -320,5 +347,16 @@ mod tests {
         // 20 ms of rank 0's own, 80 ms of groups halved.
         assert!((two.wall_s - 0.06).abs() < 1e-12, "{}", two.wall_s);
         assert!((two.speedup - 0.1 / 0.06).abs() < 1e-9);
+        // Split by what takes it: the same 20 ms of rank 0's own on every
+        // count, the groups' 40 ms here and 10 ms on 8 ranks.
+        assert!((two.by_stage.coordinator_s - 0.02).abs() < 1e-12);
+        assert!((two.by_stage.group_steps_s - 0.04).abs() < 1e-12);
+        assert_eq!(two.by_stage.island_solves_s, 0.0);
+        let eight = d.predicted.iter().find(|p| p.ranks == 8).unwrap();
+        assert!((eight.by_stage.coordinator_s - 0.02).abs() < 1e-12);
+        assert!((eight.by_stage.group_steps_s - 0.01).abs() < 1e-12);
+        for p in &d.predicted {
+            assert!((p.by_stage.total_s() - p.wall_s).abs() < 1e-15);
+        }
     }
 }

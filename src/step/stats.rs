@@ -298,6 +298,35 @@ pub struct PredictedRanks {
     pub wall_s: f64,
     /// The longest step so predicted.
     pub worst_step_s: f64,
+    /// What `wall_s` is made of: rank 0's own seconds and each
+    /// distributable stage's predicted seconds, summed over the steps.
+    #[serde(default)]
+    pub by_stage: PredictedStages,
+}
+
+/// A predicted wall split by what takes it (`PredictedRanks::by_stage`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PredictedStages {
+    /// Rank 0's own: everything outside the distributable stages
+    /// (integration, broadphase, planning, merging, the leak check, the
+    /// outputs), the same on any number of ranks.
+    pub coordinator_s: f64,
+    pub narrowphase_s: f64,
+    pub island_solves_s: f64,
+    pub group_steps_s: f64,
+    /// The first stage of the groups split before they step.
+    pub prepare_pairs_s: f64,
+}
+
+impl PredictedStages {
+    /// Their sum: the predicted wall.
+    pub fn total_s(&self) -> f64 {
+        self.coordinator_s
+            + self.narrowphase_s
+            + self.island_solves_s
+            + self.group_steps_s
+            + self.prepare_pairs_s
+    }
 }
 
 /// The link `Distribution::predicted` assumed between rank 0 and each worker.
