@@ -298,8 +298,8 @@ pub struct PredictedRanks {
     pub wall_s: f64,
     /// The longest step so predicted.
     pub worst_step_s: f64,
-    /// What `wall_s` is made of: rank 0's own seconds and each
-    /// distributable stage's predicted seconds, summed over the steps.
+    /// What `wall_s` is made of (to rounding): rank 0's own seconds and
+    /// each distributable stage's predicted seconds, summed over the steps.
     #[serde(default)]
     pub by_stage: PredictedStages,
 }
@@ -319,7 +319,7 @@ pub struct PredictedStages {
 }
 
 impl PredictedStages {
-    /// Their sum: the predicted wall.
+    /// Their sum: the predicted wall, to rounding.
     pub fn total_s(&self) -> f64 {
         self.coordinator_s
             + self.narrowphase_s
