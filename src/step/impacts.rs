@@ -414,7 +414,7 @@ fn bodies_of((a, b): PairKey) -> (usize, usize) {
 
 /// The bodies of `pairs`, each pair's two.
 fn bodies_of_pairs(pairs: &[PairKey]) -> impl Iterator<Item = usize> + '_ {
-    pairs.iter().flat_map(|&(a, b)| [a as usize, b as usize])
+    pairs.iter().flat_map(|&k| <[usize; 2]>::from(bodies_of(k)))
 }
 
 /// The dynamic bodies of `pair`.
