@@ -93,14 +93,14 @@ impl Row {
     }
 
     /// Relative velocity along the row: J·v.
-    #[inline]
+    #[inline(always)]
     pub(super) fn velocity(&self, v: &[Vector3<f64>], w: &[Vector3<f64>]) -> f64 {
         self.lin.dot(&v[self.a]) + self.ang_a.dot(&w[self.a]) - self.lin.dot(&v[self.b])
             + self.ang_b.dot(&w[self.b])
     }
 
     /// Adds the velocity change of an impulse `p` on this row to both bodies.
-    #[inline]
+    #[inline(always)]
     pub(super) fn change_velocities(&self, p: f64, v: &mut [Vector3<f64>], w: &mut [Vector3<f64>]) {
         v[self.a] += self.dva * p;
         w[self.a] += self.dwa * p;
@@ -564,7 +564,7 @@ impl<'a> IterativeSystem<'a> {
 
     /// Row i's bounds; a friction row's are its coefficients times its
     /// normal row's impulse.
-    #[inline]
+    #[inline(always)]
     pub(super) fn bounds(&self, i: usize, p: &[f64]) -> (f64, f64) {
         match self.findex[i] {
             None => (self.lo[i], self.hi[i]),
@@ -581,7 +581,7 @@ impl<'a> IterativeSystem<'a> {
     }
 
     /// w_i = (A p + b)_i + c·A_ii·p_i.
-    #[inline]
+    #[inline(always)]
     pub(super) fn velocity(&self, i: usize, s: &IterativeState) -> f64 {
         self.b[i] + self.rows[i].velocity(&s.dv, &s.dw) + self.compliance * self.diag[i] * s.p[i]
     }
@@ -607,15 +607,19 @@ impl<'a> IterativeSystem<'a> {
         if self.diag[i] <= NO_RESPONSE {
             return 0.0;
         }
-        let wi = self.velocity(i, s);
         let (l, h) = self.bounds(i, &s.p);
-        match (s.p[i] <= l, s.p[i] >= h) {
-            (true, true) => 0.0,
-            (true, false) if wi >= 0.0 => 0.0,
-            (true, false) => -wi,
-            (false, true) if wi <= 0.0 => 0.0,
-            (false, true) => wi,
-            (false, false) => wi.abs(),
+        let (at_lower, at_upper) = (s.p[i] <= l, s.p[i] >= h);
+        if at_lower && at_upper {
+            // Pinned (both bounds 0): any velocity meets the conditions.
+            return 0.0;
+        }
+        let wi = self.velocity(i, s);
+        match (at_lower, at_upper) {
+            (true, _) if wi >= 0.0 => 0.0,
+            (true, _) => -wi,
+            (_, true) if wi <= 0.0 => 0.0,
+            (_, true) => wi,
+            _ => wi.abs(),
         }
     }
 
@@ -633,22 +637,31 @@ impl<'a> IterativeSystem<'a> {
             .sum::<f64>()
     }
 
-    /// One projected Gauss–Seidel sweep over the rows in order.
+    /// One projected Gauss–Seidel sweep over the rows in order. A row
+    /// pinned at zero (a friction row whose normal row pushes nothing: its
+    /// bounds are both 0) stays there whatever its velocity, and a row
+    /// whose impulse does not change moves no body, so neither is worked
+    /// out (a quarter and over a third of a settling pile's row updates).
     pub(super) fn sweep(&self, s: &mut IterativeState) {
         for (i, row) in self.rows.iter().enumerate() {
             if self.diag[i] <= NO_RESPONSE {
                 continue;
             }
-            let wi = self.velocity(i, s);
             let (l, h) = self.bounds(i, &s.p);
+            if l == 0.0 && h == 0.0 && s.p[i] == 0.0 {
+                continue;
+            }
+            let wi = self.velocity(i, s);
             let new = (s.p[i] - wi / (self.diag[i] * (1.0 + self.compliance))).clamp(l, h);
             let delta = if new.is_finite() {
                 new - s.p[i]
             } else {
                 -s.p[i]
             };
-            s.p[i] += delta;
-            row.change_velocities(delta, &mut s.dv, &mut s.dw);
+            if delta != 0.0 {
+                s.p[i] += delta;
+                row.change_velocities(delta, &mut s.dv, &mut s.dw);
+            }
         }
     }
 }
