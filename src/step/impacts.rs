@@ -418,8 +418,8 @@ fn bodies_of_pairs(pairs: &[PairKey]) -> impl Iterator<Item = usize> + '_ {
 }
 
 /// The dynamic bodies of `pair`.
-fn dynamic_bodies(g: &Region, (a, b): PairKey) -> Vec<usize> {
-    [a as usize, b as usize]
+fn dynamic_bodies(g: &Region, pair: PairKey) -> Vec<usize> {
+    <[usize; 2]>::from(bodies_of(pair))
         .into_iter()
         .filter(|&i| g.bodies[i].is_dynamic())
         .collect::<Vec<_>>()
