@@ -19,8 +19,8 @@ use crate::contact::system::{IterativeState, IterativeSystem, Step};
 /// The large-island method's settings.
 #[derive(Clone, Copy, Debug)]
 pub struct PileSweepSettings {
-    /// Sweeps at most: 200 keep a 300-body pile's 4 300-row solve near
-    /// 20 ms and leave its parts still enough to come to rest.
+    /// Sweeps at most: 200 keep a settling bin's 2 400-row solve near
+    /// 7 ms and leave its parts still enough to come to rest.
     pub max_sweeps: usize,
     /// Sweeps between checks of the conditions (a check costs about a
     /// sweep).
