@@ -70,8 +70,9 @@ impl StepSink for Prediction {
         for call in &profile.stages {
             let best = stage_s_up_to(call, MOST_RANKS, &self.link);
             for (i, &ranks) in BOUND_RANKS.iter().enumerate() {
-                step_s[i] += best[ranks as usize - 1];
-                *stage_entry(&mut step[i], call.kind) += best[ranks as usize - 1];
+                let stage_s = best[ranks as usize - 1];
+                step_s[i] += stage_s;
+                *stage_entry(&mut step[i], call.kind) += stage_s;
             }
         }
         for i in 0..BOUND_RANKS.len() {

@@ -641,7 +641,8 @@ impl<'a> IterativeSystem<'a> {
     /// pinned at zero (a friction row whose normal row pushes nothing: its
     /// bounds are both 0) stays there whatever its velocity, and a row
     /// whose impulse does not change moves no body, so neither is worked
-    /// out (a quarter and over a third of a settling pile's row updates).
+    /// out: the impulses and velocity changes are the plain sweep's (a
+    /// zero's sign aside).
     pub(super) fn sweep(&self, s: &mut IterativeState) {
         for (i, row) in self.rows.iter().enumerate() {
             if self.diag[i] <= NO_RESPONSE {
