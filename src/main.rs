@@ -94,6 +94,11 @@ struct RunArgs {
     /// world.speculative_speed; default 0).
     #[arg(long)]
     speculative_speed: Option<f64>,
+    /// Blocks a large contact island is cut into so that the ranks share
+    /// its sweeps, with the same results on any rank count (overrides
+    /// world.island_blocks; default 1: each island swept whole).
+    #[arg(long)]
+    island_blocks: Option<u32>,
     /// Do not render, even if the scene has a [render] section.
     #[arg(long)]
     no_render: bool,
@@ -497,6 +502,7 @@ fn run_options(cli: &RunArgs, live: bool) -> RunOptions {
         dt: cli.dt,
         sample_every: cli.sample_every,
         speculative_speed: cli.speculative_speed,
+        island_blocks: cli.island_blocks,
         no_render: cli.no_render,
         // A live run prints its address, not a bar.
         no_progress: cli.no_progress || live,

@@ -25,6 +25,8 @@ pub struct RunOptions {
     pub dt: Option<f64>,
     pub sample_every: Option<f64>,
     pub speculative_speed: Option<f64>,
+    /// Blocks a large island is cut into (`Settings::island_blocks`).
+    pub island_blocks: Option<u32>,
     pub no_render: bool,
     pub no_progress: bool,
     pub no_sleep: bool,
@@ -64,6 +66,10 @@ pub fn apply_overrides(scene: &mut Scene, opts: &RunOptions) -> Result<(), Strin
             ));
         }
         scene.settings.speculative_speed_given = Some(v);
+    }
+    if let Some(n) = opts.island_blocks {
+        crate::scene::check_island_blocks(n).map_err(|m| format!("--island-blocks {m}"))?;
+        scene.settings.island_blocks = n;
     }
     if let Some(c) = opts.checkpoint_every {
         if !c.is_finite() || c <= 0.0 {

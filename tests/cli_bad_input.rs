@@ -320,6 +320,8 @@ fn bad_command_line_override_exits_2_naming_the_option() {
         ("--sample-every", "nan"),
         ("--link-latency-us", "-1"),
         ("--link-bytes-per-s", "0"),
+        ("--island-blocks", "0"),
+        ("--island-blocks", "257"),
     ] {
         let arg = format!("{flag}={value}");
         let o = case.run(&[&arg]);

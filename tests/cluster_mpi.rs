@@ -419,6 +419,79 @@ fn split_groups_give_the_same_result_on_1_and_3_ranks() {
     assert_same_result(&whole, &kept);
 }
 
+/// An 8 × 8 layer of cubes side by side on a floor, dropped 0–1 mm: one
+/// island of 64 moving bodies and about 1 500 rows from the first step, so
+/// that the large-island method solves it each step.
+fn layer_of_cubes(root: &Path) -> PathBuf {
+    let mut text = String::from(
+        "[world]\ndt = 0.01\nduration = 0.3\n\n\
+         [objects.floor]\nshape = { box = { half_extents = [1.0, 1.0, 0.1] } }\nmass = 1.0\nfriction = 0.5\n\n\
+         [objects.cube]\nshape = { box = { half_extents = [0.05, 0.05, 0.05] } }\nmass = 1.0\nfriction = 0.5\n\n\
+         [[bodies]]\nobject = \"floor\"\nposition = [0.0, 0.0, -0.1]\nfixed = true\n",
+    );
+    for i in 0..8 {
+        for j in 0..8 {
+            let (x, y) = (-0.35 + 0.1 * i as f64, -0.35 + 0.1 * j as f64);
+            let z = 0.05 + 0.0005 * ((i + j) % 3) as f64;
+            text += &format!("\n[[bodies]]\nobject = \"cube\"\nposition = [{x}, {y}, {z}]\n");
+        }
+    }
+    let path = root.join("layer.toml");
+    std::fs::write(&path, text).expect("writing the layer scene");
+    path
+}
+
+/// A large island cut in blocks (`--island-blocks`) is swept by the ranks
+/// together, and ends where one rank sweeping every block ends: on 1, 2
+/// and 3 ranks and without mpirun. Cut in blocks, it ends elsewhere than
+/// swept whole (the rows' order changed), so the blocks were used.
+#[test]
+fn an_island_shared_by_blocks_ends_as_on_one_rank() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = layer_of_cubes(root.path());
+    let args = ["--island-blocks", "4", "--no-render"];
+    let reference = run(root.path(), "np1", Ranks::Np(1), &scene, &args);
+    let whole = run(
+        root.path(),
+        "np1-whole",
+        Ranks::Np(1),
+        &scene,
+        &["--no-render"],
+    );
+    assert!(
+        reference.count(&["counters", "solve", "iterative_sweeps"]) > 0,
+        "the large-island method never swept"
+    );
+    assert_ne!(reference.state_hash(), whole.state_hash());
+    let alone = run(root.path(), "alone", Ranks::Alone, &scene, &args);
+    assert_same_result(&reference, &alone);
+    for np in [2, 3] {
+        let other = run(
+            root.path(),
+            &format!("np{np}"),
+            Ranks::Np(np),
+            &scene,
+            &args,
+        );
+        assert!(
+            other.count(&["distributed", "islands_shared"]) > 0
+                && other.count(&["distributed", "block_exchanges"]) > 0,
+            "{}: no island was shared by blocks",
+            other.what
+        );
+        assert!(
+            other.per_rank()[1..]
+                .iter()
+                .all(|r| r["busy_s"].as_f64().unwrap() > 0.0),
+            "{}: a worker swept nothing: {:?}",
+            other.what,
+            other.per_rank()
+        );
+        assert_same_result(&reference, &other);
+    }
+}
+
 #[test]
 fn distributed_island_solves_match_one_rank() {
     let _one = one_at_a_time();

@@ -160,6 +160,7 @@ fn the_pyramid_answers_alike_by_both_methods() {
     let iterative = solve_island(&task);
     let exact = solve_island(&IslandTask {
         iterative_min_rows: u32::MAX,
+        island_blocks: 1,
         ..task.clone()
     });
     for (name, r) in [("iterative", &iterative), ("Dantzig", &exact)] {
@@ -283,6 +284,7 @@ fn interior_answers_move_the_bodies_as_dantzig_does() {
         let interior = solve_island(&task);
         let exact = solve_island(&IslandTask {
             iterative_min_rows: u32::MAX,
+            island_blocks: 1,
             ..task.clone()
         });
         let seen = describe(name, &interior.stats);

@@ -948,6 +948,17 @@ fn infinite_gravity_is_refused() {
 }
 
 #[test]
+fn island_blocks_out_of_range_are_refused() {
+    for (given, got) in [("0", "0"), ("1000", "1000")] {
+        let e = expect_error(
+            &format!("[world]\nduration = 1.0\nisland_blocks = {given}\n"),
+            "world.island_blocks",
+        );
+        assert_eq!(e.message, format!("must be from 1 to 256 (got {got})"));
+    }
+}
+
+#[test]
 fn nan_gravity_is_refused() {
     let e = expect_error(
         "[world]\nduration = 1.0\ngravity = [nan, 0.0, -9.81]\n",

@@ -44,6 +44,9 @@ pub struct MpiExecutor<'w> {
     pub(super) speeds: Vec<f64>,
     pub(super) book: Vec<RankBook>,
     pub(super) meters: Vec<SpeedMeter>,
+    /// Each slot's speed at sweeping blocks of a shared island
+    /// (`shared_island`), rows swept against seconds.
+    pub(super) block_meters: Vec<SpeedMeter>,
     pub(super) latency_s: f64,
     pub(super) dist: Distribution,
     pub(super) clock: StageClock,
@@ -88,6 +91,7 @@ impl<'w> MpiExecutor<'w> {
             speeds: vec![1.0; slots],
             book: vec![RankBook::default(); slots],
             meters: vec![SpeedMeter::default(); slots],
+            block_meters: vec![SpeedMeter::default(); slots],
             latency_s: 0.0,
             dist: Distribution::default(),
             clock: StageClock::default(),

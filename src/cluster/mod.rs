@@ -19,6 +19,7 @@ mod polled;
 mod prepare;
 mod render_rank;
 mod scatter;
+mod shared_island;
 mod speed;
 mod stages;
 mod worker;

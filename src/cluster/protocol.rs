@@ -6,6 +6,7 @@
 //! scene, so shapes and masses never travel. Encoded with bincode.
 
 use crate::collision::narrowphase::{PairResult, PairTask};
+use crate::contact::block_sweeps::{BlockState, BlockSystem};
 use crate::contact::solver::{IslandResult, IslandTask};
 use crate::render::Frame;
 use crate::scene::ForceWindow;
@@ -55,6 +56,16 @@ pub enum Request {
         /// Per range: its group (an index into `inputs`) and its pairs.
         shares: Vec<(u32, (usize, usize))>,
     },
+    /// `solve_islands` stage, an island shared by the ranks
+    /// (`shared_island`): sweep these blocks `sweeps` times from these
+    /// states and send them back. `open` (the solve's first exchange)
+    /// carries the blocks' systems, which the worker keeps for the
+    /// exchanges after it.
+    SweepBlocks {
+        open: Option<Vec<BlockSystem>>,
+        states: Vec<BlockState>,
+        sweeps: u32,
+    },
     /// At a step boundary of a live run or a replay of one
     /// (`Executor::share_forces`): the scene's external forces from now on,
     /// all of them (its own `[[forces]]` and the hand's). The worker
@@ -90,6 +101,11 @@ pub enum Reply {
     /// One answer per share of the request, in its order.
     PreparePairs {
         prepared: Vec<PreparedPairs>,
+        busy_s: f64,
+    },
+    /// The blocks' states after the sweeps, in the request's order.
+    SweepBlocks {
+        states: Vec<BlockState>,
         busy_s: f64,
     },
     Pong,

@@ -7,6 +7,7 @@ use super::polled::Polled;
 use super::protocol::{Reply, Request as Req};
 use super::scatter::{COORDINATOR_SHARE, SELF_SCHEDULED_SHARE};
 use super::schedule;
+use super::shared_island::SharedBlocks;
 use crate::body::ObjectDef;
 use crate::collision::narrowphase::{self, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
@@ -86,6 +87,34 @@ impl MpiExecutor<'_> {
     }
 
     pub(super) fn solve_islands_stage(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
+        if self.roles.workers.is_empty() || !tasks.iter().any(solver::sweeps_by_blocks) {
+            return self.solve_whole_islands(tasks);
+        }
+        // The islands swept by blocks first, every rank sharing each; then
+        // the others shared out whole.
+        let (by_blocks, whole): (Vec<usize>, Vec<usize>) =
+            (0..tasks.len()).partition(|&i| solver::sweeps_by_blocks(&tasks[i]));
+        let mut results = vec![IslandResult::default(); tasks.len()];
+        let started = Instant::now();
+        for &i in &by_blocks {
+            results[i] = solver::solve_island_with(&tasks[i], &mut SharedBlocks::new(self));
+        }
+        self.book[0].busy_s += started.elapsed().as_secs_f64();
+        self.book[0].tasks_is += by_blocks.len() as u64;
+        self.dist.islands_shared += by_blocks.len() as u64;
+        let mut tasks: Vec<Option<IslandTask>> = tasks.into_iter().map(Some).collect();
+        let rest: Vec<IslandTask> = whole
+            .iter()
+            .map(|&i| tasks[i].take().expect("once"))
+            .collect();
+        for (r, &i) in self.solve_whole_islands(rest).into_iter().zip(&whole) {
+            results[i] = r;
+        }
+        results
+    }
+
+    /// The stage's islands, each solved whole on one rank.
+    fn solve_whole_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
         let units: Vec<f64> = tasks
             .iter()
             .map(|t| {

@@ -3,6 +3,7 @@
 use super::protocol::{self, Reply, Request as Req, WorkerReport, decode, encode};
 use super::speed::{stall, thread_cpu_time};
 use crate::collision::narrowphase;
+use crate::contact::block_sweeps::BlockSystem;
 use crate::contact::solver;
 use crate::output::capture;
 use crate::scene::Scene;
@@ -18,6 +19,8 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
     // The scene with the forces rank 0 last shared (`Req::Forces`), once it
     // has shared any.
     let mut shared: Option<Scene> = None;
+    // The blocks of the island being shared (`Req::SweepBlocks`).
+    let mut blocks: Vec<BlockSystem> = Vec::new();
     loop {
         let wait = Instant::now();
         let (bytes, _) = root.receive_vec_with_tag::<u8>(protocol::TAG_REQUEST);
@@ -105,6 +108,33 @@ pub fn worker_loop(world: &SimpleCommunicator, scene: &Scene, slow: f64) {
                 report.busy_s += busy;
                 Reply::PreparePairs {
                     prepared,
+                    busy_s: busy,
+                }
+            }
+            Req::SweepBlocks {
+                open,
+                mut states,
+                sweeps,
+            } => {
+                if let Some(open) = open {
+                    blocks = open;
+                }
+                if states.len() != blocks.len() {
+                    eprintln!(
+                        "rigidsim: rank {}: {} block states for {} blocks",
+                        world.rank(),
+                        states.len(),
+                        blocks.len()
+                    );
+                    world.abort(4);
+                }
+                for (block, state) in blocks.iter().zip(&mut states) {
+                    block.sweep(state, sweeps as usize);
+                }
+                let busy = stall(slow, clock, cpu).as_secs_f64();
+                report.busy_s += busy;
+                Reply::SweepBlocks {
+                    states,
                     busy_s: busy,
                 }
             }

@@ -4,12 +4,14 @@
 //! attempts after it; then the answer's checks (`guard`).
 
 use super::guard;
+use super::methods::block_sweeps::{BlockRunner, IslandBlocks};
 use super::methods::dantzig::Dantzig;
 use super::methods::lcp::LcpError;
+use super::methods::pile_sweeps::Sweeping;
 use super::methods::{interior, pile_sweeps, sweeps};
 use super::policy::{Attempt, SolverSettings, SystemFacts};
 use super::system::{IterativeSystem, PhaseSystem};
-use super::task::SolveStats;
+use super::task::{IslandBody, SolveStats};
 use nalgebra::Vector3;
 
 /// A system on its way through the attempts, with what they left.
@@ -32,16 +34,27 @@ pub(super) struct Chain<'a> {
     /// Dantzig's method once tried, and why it failed on the exact system.
     dantzig: Option<Dantzig<'a>>,
     failure: Option<LcpError>,
+    /// Where the large-island method sweeps by blocks.
+    by_blocks: Option<ByBlocks<'a>>,
+}
+
+/// An island the large-island method sweeps by blocks (`block_sweeps`):
+/// its bodies, the blocks to cut it into, and who sweeps them.
+pub(super) struct ByBlocks<'a> {
+    pub(super) bodies: &'a [IslandBody],
+    pub(super) count: usize,
+    pub(super) runner: &'a mut dyn BlockRunner,
 }
 
 impl<'a> Chain<'a> {
     /// `system` of an island of `bodies` bodies, whose task sets
-    /// `iterative_min_rows`.
+    /// `iterative_min_rows`, and how it is cut in blocks, where it is.
     pub(super) fn new(
         system: &'a PhaseSystem,
         iterative_min_rows: u32,
         bodies: usize,
         settings: &'a SolverSettings,
+        by_blocks: Option<ByBlocks<'a>>,
     ) -> Self {
         let iterative = system.iterative();
         let facts = SystemFacts::of(
@@ -62,6 +75,7 @@ impl<'a> Chain<'a> {
             swept: None,
             dantzig: None,
             failure: None,
+            by_blocks,
         }
     }
 
@@ -131,12 +145,22 @@ impl<'a> Chain<'a> {
         vec![p]
     }
 
-    fn large_island(&self, last: bool, stats: &mut SolveStats) -> Option<Vec<f64>> {
+    fn large_island(&mut self, last: bool, stats: &mut SolveStats) -> Option<Vec<f64>> {
+        let sweeping = match &mut self.by_blocks {
+            Some(by) => Sweeping::Blocks {
+                blocks: IslandBlocks::cut(by.bodies, &self.system.rows, by.count),
+                runner: &mut *by.runner,
+                settings: self.settings.island_blocks,
+                first: true,
+            },
+            None => Sweeping::Whole,
+        };
         let answer = pile_sweeps::solve(
             &self.iterative,
             &self.system.warm,
             self.bodies,
             &self.settings.large_island,
+            sweeping,
         );
         stats.iterative_solves += 1;
         stats.iterative_sweeps += answer.sweeps as u64;

@@ -14,4 +14,5 @@ pub mod solver;
 mod system;
 mod task;
 
+pub use methods::block_sweeps;
 pub use methods::lcp;

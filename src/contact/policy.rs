@@ -21,6 +21,7 @@
 //! ones start: the interior point's missed answer starts the sweeps, the
 //! sweeps' or the start sweeps' answer starts Dantzig's method (`chain`).
 
+use super::methods::block_sweeps::BlockSweepSettings;
 use super::methods::interior;
 use super::methods::pile_sweeps::PileSweepSettings;
 use super::methods::sweeps::SweepSettings;
@@ -220,6 +221,8 @@ pub struct SolverSettings {
     pub sweeps: SweepSettings,
     /// The large-island method's budget and checks.
     pub large_island: PileSweepSettings,
+    /// How it sweeps an island cut in blocks (`IslandTask::island_blocks`).
+    pub island_blocks: BlockSweepSettings,
 }
 
 impl Default for SolverSettings {
@@ -240,6 +243,7 @@ impl Default for SolverSettings {
             warm_close: 1e-4,
             sweeps,
             large_island: PileSweepSettings::default(),
+            island_blocks: BlockSweepSettings::default(),
         }
     }
 }

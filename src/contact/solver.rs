@@ -32,7 +32,8 @@
 //! the policy chooses for it (`policy`, `chain`, `methods`), and its
 //! answer through the checks (`guard`) before it is applied.
 
-use super::chain::Chain;
+use super::chain::{ByBlocks, Chain};
+use super::methods::block_sweeps::{BlockRunner, InlineBlocks};
 use super::policy::{self, SolverSettings};
 use super::restitution::{bounce_basis, meeting_speed};
 use super::system::{Phase, PhaseSystem, Row, SEPARATING_EPS, normal_rows};
@@ -52,10 +53,28 @@ const APPROACH_EPS: f64 = 1e-9;
 
 /// Solves one island: impact impulses, then resting forces.
 pub fn solve_island(task: &IslandTask) -> IslandResult {
+    solve_island_with(task, &mut InlineBlocks)
+}
+
+/// Whether the island's solve would sweep it by blocks: cut in blocks,
+/// with the rows and moving bodies for the large-island method
+/// (`policy::attempts`; each phase decides on its own rows, so this is
+/// where the blocks are worth handing to other ranks, not a promise).
+pub fn sweeps_by_blocks(task: &IslandTask) -> bool {
+    let settings = SolverSettings::default();
+    let moving = task.bodies.iter().filter(|b| b.inv_mass > 0.0).count();
+    task.island_blocks > 1
+        && task.rows() >= task.iterative_min_rows as usize
+        && moving > settings.large_island_bodies
+}
+
+/// The same, with `runner` sweeping the blocks of a large island cut in
+/// blocks (`IslandTask::island_blocks`): the same answer whoever sweeps them.
+pub fn solve_island_with(task: &IslandTask, runner: &mut dyn BlockRunner) -> IslandResult {
     let Some(merged) = merge_coincident_contacts(task) else {
-        return solve_distinct(task);
+        return solve_distinct(task, runner);
     };
-    let mut r = solve_distinct(&merged.task);
+    let mut r = solve_distinct(&merged.task, runner);
     // Each merged contact's force goes to the first of its copies (which
     // warm-starts the merged contact again next step: see
     // `merge_coincident_contacts`).
@@ -137,7 +156,7 @@ fn merge_coincident_contacts(task: &IslandTask) -> Option<MergedIsland> {
 }
 
 /// `solve_island` on an island without coincident contacts.
-fn solve_distinct(task: &IslandTask) -> IslandResult {
+fn solve_distinct(task: &IslandTask, runner: &mut dyn BlockRunner) -> IslandResult {
     let n = task.bodies.len();
     let mut out = IslandResult {
         impulse: vec![Vector3::zeros(); n],
@@ -163,7 +182,7 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
     });
     let mut pushed = vec![false; task.contacts.len()];
     if approaching {
-        let (rows, p, sum) = solve_phase(task, &v, &w, Phase::Impact, &mut out.stats);
+        let (rows, p, sum) = solve_phase(task, &v, &w, Phase::Impact, &mut out.stats, runner);
         out.normal_impulse_sum = sum;
         for (row, &pi) in rows.iter().zip(&p) {
             row.apply(pi, &mut out.impulse, &mut out.angular_impulse);
@@ -175,7 +194,7 @@ fn solve_distinct(task: &IslandTask) -> IslandResult {
     }
 
     // 2. Resting forces on the end-of-step velocities.
-    solve_resting(task, (&v, &w), &mut out, &mut pushed);
+    solve_resting(task, (&v, &w), &mut out, &mut pushed, runner);
     out.carried = carried(task, &start_speed, &pushed);
     out.pushed = pushed;
     out
@@ -189,6 +208,7 @@ fn solve_resting(
     (v, w): (&[Vector3<f64>], &[Vector3<f64>]),
     out: &mut IslandResult,
     pushed: &mut [bool],
+    runner: &mut dyn BlockRunner,
 ) {
     let vf: Vec<Vector3<f64>> = v
         .iter()
@@ -226,6 +246,7 @@ fn solve_resting(
             curvature: &curvature,
         },
         &mut out.stats,
+        runner,
     );
     out.normal_force_sum = sum / task.dt;
     for (c, r) in task.contacts.iter().zip(normal_rows(task)) {
@@ -366,11 +387,23 @@ fn solve_phase(
     w: &[Vector3<f64>],
     phase: Phase,
     stats: &mut SolveStats,
+    runner: &mut dyn BlockRunner,
 ) -> (Vec<Row>, Vec<f64>, f64) {
     let system = PhaseSystem::build(task, v, w, phase);
     system.count(stats);
     let settings = SolverSettings::default();
-    let mut chain = Chain::new(&system, task.iterative_min_rows, v.len(), &settings);
+    let by_blocks = (task.island_blocks > 1).then_some(ByBlocks {
+        bodies: &task.bodies,
+        count: task.island_blocks as usize,
+        runner,
+    });
+    let mut chain = Chain::new(
+        &system,
+        task.iterative_min_rows,
+        v.len(),
+        &settings,
+        by_blocks,
+    );
     let attempts = policy::attempts(&chain.facts, &settings);
     let (attempt, p) = chain.walk(&attempts, stats);
     let p = chain.guard(attempt, p, (v, w), stats);
@@ -450,6 +483,7 @@ mod tests {
             dt: 0.01,
             restitution_threshold: 0.05,
             iterative_min_rows,
+            island_blocks: 1,
         }
     }
 
@@ -639,6 +673,7 @@ mod tests {
             dt: 0.01,
             restitution_threshold: 0.05,
             iterative_min_rows: ITERATIVE_MIN_ROWS as u32,
+            island_blocks: 1,
         };
         let twice = task(
             corners
@@ -655,8 +690,8 @@ mod tests {
                 .collect(),
         );
         let merged = solve_island(&twice);
-        let unmerged = solve_distinct(&twice);
-        let by_hand = solve_distinct(&once);
+        let unmerged = solve_distinct(&twice, &mut InlineBlocks);
+        let by_hand = solve_distinct(&once, &mut InlineBlocks);
         assert_eq!(
             merged.stats.rows, 12,
             "four contacts of three rows, one phase"
@@ -726,6 +761,7 @@ mod tests {
                 dt: 0.01,
                 restitution_threshold: 0.05,
                 iterative_min_rows: 300,
+                island_blocks: 1,
             }
         };
         let energy = |t: &IslandTask, r: &IslandResult| {
@@ -804,6 +840,7 @@ mod tests {
             dt: h,
             restitution_threshold: 0.5 * g * h,
             iterative_min_rows: 300,
+            island_blocks: 1,
         }
     }
 

@@ -13,6 +13,7 @@ use super::task::{
 };
 use crate::collision::narrowphase::CONTACT_TOLERANCE;
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
 /// A row whose diagonal A_ii is at most this moves nothing: no body behind
 /// it can be pushed (both static, or a friction row of no lever), so every
@@ -42,6 +43,7 @@ const OVERLAP_RECOVERY: f64 = 0.2;
 const OVERLAP_FIRM: f64 = 0.99 * CONTACT_TOLERANCE;
 
 /// One LCP row: direction d at contact `contact`, with M⁻¹Jᵀ precomputed.
+#[derive(Clone, Serialize, Deserialize)]
 pub(super) struct Row {
     pub(super) a: usize,
     pub(super) b: usize,
@@ -76,6 +78,16 @@ impl Row {
             dwa: ba.inv_inertia * ang_a,
             dvb: -d * bb.inv_mass,
             dwb: bb.inv_inertia * ang_b,
+        }
+    }
+
+    /// The same row between bodies numbered `a` and `b` elsewhere (a
+    /// block's own numbering, `block_sweeps`).
+    pub(super) fn renumbered(&self, a: usize, b: usize) -> Row {
+        Row {
+            a,
+            b,
+            ..self.clone()
         }
     }
 
@@ -644,25 +656,38 @@ impl<'a> IterativeSystem<'a> {
     /// out: the impulses and velocity changes are the plain sweep's (a
     /// zero's sign aside).
     pub(super) fn sweep(&self, s: &mut IterativeState) {
-        for (i, row) in self.rows.iter().enumerate() {
-            if self.diag[i] <= NO_RESPONSE {
-                continue;
-            }
-            let (l, h) = self.bounds(i, &s.p);
-            if l == 0.0 && h == 0.0 && s.p[i] == 0.0 {
-                continue;
-            }
-            let wi = self.velocity(i, s);
-            let new = (s.p[i] - wi / (self.diag[i] * (1.0 + self.compliance))).clamp(l, h);
-            let delta = if new.is_finite() {
-                new - s.p[i]
-            } else {
-                -s.p[i]
-            };
-            if delta != 0.0 {
-                s.p[i] += delta;
-                row.change_velocities(delta, &mut s.dv, &mut s.dw);
-            }
+        for i in 0..self.rows.len() {
+            self.sweep_row(i, s);
+        }
+    }
+
+    /// The same sweep over these rows only, in the order given.
+    pub(super) fn sweep_rows(&self, rows: &[usize], s: &mut IterativeState) {
+        for &i in rows {
+            self.sweep_row(i, s);
+        }
+    }
+
+    /// Row i's step of a sweep (`sweep`).
+    #[inline(always)]
+    fn sweep_row(&self, i: usize, s: &mut IterativeState) {
+        if self.diag[i] <= NO_RESPONSE {
+            return;
+        }
+        let (l, h) = self.bounds(i, &s.p);
+        if l == 0.0 && h == 0.0 && s.p[i] == 0.0 {
+            return;
+        }
+        let wi = self.velocity(i, s);
+        let new = (s.p[i] - wi / (self.diag[i] * (1.0 + self.compliance))).clamp(l, h);
+        let delta = if new.is_finite() {
+            new - s.p[i]
+        } else {
+            -s.p[i]
+        };
+        if delta != 0.0 {
+            s.p[i] += delta;
+            self.rows[i].change_velocities(delta, &mut s.dv, &mut s.dw);
         }
     }
 }

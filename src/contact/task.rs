@@ -81,6 +81,9 @@ pub struct IslandTask {
     /// Dantzig's method alone, without the interior point either (tests
     /// compare the methods so).
     pub iterative_min_rows: u32,
+    /// Blocks the large-island method cuts the island into, so that ranks
+    /// can share it (`block_sweeps`); 1: swept whole.
+    pub island_blocks: u32,
 }
 
 impl IslandTask {

@@ -56,7 +56,7 @@ pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// differ), `Counters::points_per_pair`, `speculative_pushes` and
 /// `speculative_ghosts`. 14: `Counters::toi_events_by_rollback`. 15:
 /// `Counters::overlap_repairs`.
-pub const FORMAT: u32 = 15;
+pub const FORMAT: u32 = 16;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.
 pub const FILE_NAME: &str = "checkpoint.bin";
@@ -97,6 +97,8 @@ pub struct Checkpoint {
     /// `Settings::pile_bodies`) the run stepped with.
     pub speculative_speed: f64,
     pub pile_bodies: u32,
+    /// The blocks a large island was swept by (`Settings::island_blocks`).
+    pub island_blocks: u32,
     pub steps: u64,
     pub bodies: Vec<Body>,
     pub counters: Counters,
@@ -181,6 +183,7 @@ impl World {
             dt: self.scene.settings.dt,
             speculative_speed: self.scene.settings.speculative_speed(),
             pile_bodies: self.scene.settings.pile_bodies,
+            island_blocks: self.scene.settings.island_blocks,
             steps: s.steps,
             bodies: s.bodies.clone(),
             counters: d.counters.clone(),
@@ -262,6 +265,13 @@ impl Checkpoint {
                  not {} m/s and {}: resume with the contact model it was written with \
                  (the scene's settings or --speculative-speed)",
                 self.speculative_speed, self.pile_bodies, dial.0, dial.1
+            )));
+        }
+        if s.island_blocks != self.island_blocks {
+            return Err(self.fail(format!(
+                "was written with world.island_blocks {}, not {}: resume with the blocks \
+                 it was written with (the scene's settings or --island-blocks)",
+                self.island_blocks, s.island_blocks
             )));
         }
         let here = scene_fingerprint(scene);

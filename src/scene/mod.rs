@@ -57,6 +57,20 @@ pub const DEFAULT_SPECULATIVE_SPEED: f64 = 0.0;
 /// pile; fewer (a cube on the floor, the cradle, two cubes) stay exact events.
 pub const DEFAULT_PILE_BODIES: u32 = 8;
 
+/// Blocks an island may be cut into at most (`Settings::island_blocks`):
+/// more than a lab has ranks, and blocks of a few bodies each in the
+/// largest piles.
+pub const MAX_ISLAND_BLOCKS: u32 = 256;
+
+/// Whether `n` may be `Settings::island_blocks`; the message if not.
+pub fn check_island_blocks(n: u32) -> Result<(), String> {
+    if (1..=MAX_ISLAND_BLOCKS).contains(&n) {
+        Ok(())
+    } else {
+        Err(format!("must be from 1 to {MAX_ISLAND_BLOCKS} (got {n})"))
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Settings {
     pub gravity: Vector3<f64>,
@@ -76,6 +90,11 @@ pub struct Settings {
     pub speculative_speed_given: Option<f64>,
     /// `world.pile_bodies` (`DEFAULT_PILE_BODIES` where absent).
     pub pile_bodies: u32,
+    /// `world.island_blocks` (or `--island-blocks`; 1 where absent): the
+    /// blocks the large-island method cuts an island into, so that ranks
+    /// share its sweeps with the same bits on any rank count; 1 sweeps it
+    /// whole.
+    pub island_blocks: u32,
     /// Trajectory sampling interval; `None` samples every step.
     pub sample_every: Option<f64>,
     pub render: Option<RenderSettings>,
@@ -435,6 +454,9 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
             format!("must be a finite number ≥ 0 m/s (got {v})"),
         ));
     }
+    if let Some(n) = w.island_blocks {
+        check_island_blocks(n).map_err(|m| ("world.island_blocks".to_string(), m))?;
+    }
     if let Some(z) = w.fall_z {
         shapes::finite_all(&[z], "world.fall_z")?;
     }
@@ -507,6 +529,7 @@ fn build_settings(file: &SceneFile) -> FieldResult<Settings> {
         friction_rule: w.friction_rule,
         speculative_speed_given: w.speculative_speed,
         pile_bodies: w.pile_bodies.unwrap_or(DEFAULT_PILE_BODIES),
+        island_blocks: w.island_blocks.unwrap_or(1),
         sample_every: file.output.sample_every,
         render,
     };

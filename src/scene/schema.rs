@@ -59,6 +59,10 @@ pub struct WorldSection {
     /// it is inside a pile (`Settings::pile_bodies`).
     #[serde(default)]
     pub pile_bodies: Option<u32>,
+    /// Blocks a large island is cut into so that ranks can share its
+    /// sweeps (`Settings::island_blocks`); 1: swept whole.
+    #[serde(default)]
+    pub island_blocks: Option<u32>,
 }
 
 impl Default for WorldSection {
@@ -75,6 +79,7 @@ impl Default for WorldSection {
             friction_rule: CombineRule::Min,
             speculative_speed: None,
             pile_bodies: None,
+            island_blocks: None,
         }
     }
 }

@@ -252,6 +252,7 @@ impl Region<'_> {
                 dt: h,
                 restitution_threshold,
                 iterative_min_rows: self.st.step_settings.iterative_min_rows as u32,
+                island_blocks: self.st.settings.island_blocks,
             });
         }
         self.counters.islands += built.tasks.len() as u64;

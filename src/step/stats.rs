@@ -242,6 +242,11 @@ pub struct Distribution {
     /// times chose (or a probe), and those that stepped it whole.
     pub steps_split: u64,
     pub steps_kept_whole: u64,
+    /// Large islands whose sweeps the ranks shared by blocks
+    /// (`--island-blocks`, `cluster::shared_island`), and the rounds of
+    /// messages their sweeps took.
+    pub islands_shared: u64,
+    pub block_exchanges: u64,
     pub message_latency_s: f64,
     /// Wall seconds rank 0 spent inside the stages that go to other ranks
     /// when there are some (pair tasks, island solves, group steps; the

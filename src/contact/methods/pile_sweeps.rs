@@ -13,6 +13,7 @@
 //! such a solve at its budget, missing the conditions by millimetres a
 //! second on a few rows, which the next step's overlap recovery mends.
 
+use super::block_sweeps::{self, BlockRunner, BlockSweepSettings, IslandBlocks};
 use super::subspace;
 use crate::contact::system::{IterativeState, IterativeSystem, Step};
 
@@ -56,19 +57,52 @@ pub(crate) struct PileAnswer {
     pub(crate) sweeps: u32,
 }
 
+/// How the method sweeps: the island's rows in order, or by blocks that
+/// ranks may share (`block_sweeps`).
+pub(crate) enum Sweeping<'r> {
+    Whole,
+    Blocks {
+        blocks: IslandBlocks,
+        runner: &'r mut dyn BlockRunner,
+        settings: BlockSweepSettings,
+        /// No exchange made yet (the runner hands the blocks out at the first).
+        first: bool,
+    },
+}
+
+impl Sweeping<'_> {
+    fn sweep(&mut self, system: &IterativeSystem, state: &mut IterativeState, sweeps: usize) {
+        match self {
+            Sweeping::Whole => {
+                for _ in 0..sweeps {
+                    system.sweep(state);
+                }
+            }
+            Sweeping::Blocks {
+                blocks,
+                runner,
+                settings,
+                first,
+            } => block_sweeps::sweep(system, state, blocks, *runner, sweeps, settings, first),
+        }
+    }
+}
+
 /// Solves `system` by sweeps from `warm` (`bodies`: the island's bodies).
 pub(crate) fn solve(
     system: &IterativeSystem,
     warm: &[f64],
     bodies: usize,
     settings: &PileSweepSettings,
+    mut sweeping: Sweeping,
 ) -> PileAnswer {
     let mut state = system.warm_state(warm, bodies);
     let by_body = subspace::rows_by_body(system.rows, bodies);
     let mut subspace_tries =
         subspace::Tries::new(settings.subspace_steps, settings.subspace_rejections);
     let mut last_free = None;
-    for sweep in 0..=settings.max_sweeps {
+    let mut sweep = 0;
+    loop {
         if sweep % settings.check_every == 0 {
             let miss = system.worst_miss(&state);
             if miss <= system.tolerance {
@@ -95,9 +129,14 @@ pub(crate) fn solve(
                 subspace_tries.record(&step);
             }
         }
-        if sweep < settings.max_sweeps {
-            system.sweep(&mut state);
+        if sweep >= settings.max_sweeps {
+            break;
         }
+        // Up to the next check, or the budget.
+        let to_check = settings.check_every - sweep % settings.check_every;
+        let sweeps = to_check.min(settings.max_sweeps - sweep);
+        sweeping.sweep(system, &mut state, sweeps);
+        sweep += sweeps;
     }
     PileAnswer {
         p: state.p,
