@@ -13,6 +13,8 @@
 //! a line per island on stderr: `csv,contacts,rows,seconds,iterative
 //! solves,unconverged,sweeps,lcp solves,pivots,compliant,failed,worst
 //! violation` (the island's two solves, impact and resting, together).
+//! With `ISLAND_BLOCKS=N`, every island is solved cut in N blocks
+//! (`IslandTask::island_blocks`; 1: whole) whatever it was captured with.
 
 use std::time::Instant;
 
@@ -29,13 +31,19 @@ fn main() {
         .filter(|p| p.extension().is_some_and(|x| x == "bin"))
         .collect();
     files.sort();
+    let blocks: Option<u32> = std::env::var("ISLAND_BLOCKS")
+        .ok()
+        .map(|v| v.parse().expect("ISLAND_BLOCKS: a whole number"));
     let tasks: Vec<IslandTask> = files
         .iter()
         .map(|p| {
             let bytes = std::fs::read(p).unwrap();
-            bincode::serde::decode_from_slice(&bytes, bincode::config::standard())
-                .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-                .0
+            let mut task: IslandTask =
+                bincode::serde::decode_from_slice(&bytes, bincode::config::standard())
+                    .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+                    .0;
+            task.island_blocks = blocks.unwrap_or(task.island_blocks);
+            task
         })
         .collect();
     // Size classes by contacts (a contact with friction is three rows).
