@@ -229,6 +229,10 @@ pub fn workers_to_use_over_link(
 /// cost model keeps it there, before one step is distributed anyway to
 /// measure it again (`StageChoice`).
 pub const PROBE_EVERY: u32 = 16;
+/// The most steps between probes: each probe that leaves the distributed
+/// steps measured slower doubles the wait up to this, as a probe of a
+/// pile's split reruns its whole group (a step's work again).
+pub const PROBE_EVERY_MOST: u32 = 256;
 /// Weight of the newest step in the measured seconds per unit of cost.
 const RATE_WEIGHT: f64 = 0.25;
 
@@ -245,7 +249,9 @@ const RATE_WEIGHT: f64 = 0.25;
 /// one rank's time. So where the model says "stay", the measured wall
 /// seconds per unit of predicted cost of the steps that went out and of
 /// those that stayed decide; a run of `PROBE_EVERY` steps kept home sends
-/// one out, so the measure of the distributed steps stays current. Where
+/// one out, so the measure of the distributed steps stays current; each
+/// step out that leaves them measured slower doubles that run, up to
+/// `PROBE_EVERY_MOST`, and one that leaves them faster restores it. Where
 /// the model says "go", it goes, as before. Only where the work is done
 /// depends on this, never a result. The first step the model keeps home
 /// is such a probe.
@@ -255,6 +261,8 @@ pub struct StageChoice {
     local_s_per_cost: f64,
     distributed_s_per_cost: f64,
     home_in_a_row: u32,
+    /// Steps kept home before the next probe.
+    probe_every: u32,
 }
 
 impl Default for StageChoice {
@@ -263,6 +271,7 @@ impl Default for StageChoice {
             local_s_per_cost: 0.0,
             distributed_s_per_cost: 0.0,
             home_in_a_row: PROBE_EVERY,
+            probe_every: PROBE_EVERY,
         }
     }
 }
@@ -282,9 +291,14 @@ impl StageChoice {
     /// Whether the measures alone send the stage out now: it measured
     /// faster out by `DISTRIBUTE_MARGIN`, or a probe of it is due.
     pub fn goes_out(&self) -> bool {
+        self.faster_out() || self.home_in_a_row >= self.probe_every
+    }
+
+    /// Whether the steps out measured faster than those home by
+    /// `DISTRIBUTE_MARGIN`.
+    fn faster_out(&self) -> bool {
         let (home, out) = (self.local_s_per_cost, self.distributed_s_per_cost);
-        let faster_out = home > 0.0 && out > 0.0 && out < home * (1.0 - DISTRIBUTE_MARGIN);
-        faster_out || self.home_in_a_row >= PROBE_EVERY
+        home > 0.0 && out > 0.0 && out < home * (1.0 - DISTRIBUTE_MARGIN)
     }
 
     /// Records a step's stage: whether it went out, its predicted cost and
@@ -309,6 +323,13 @@ impl StageChoice {
         } else {
             measured
         };
+        if distributed && self.local_s_per_cost > 0.0 {
+            self.probe_every = if self.faster_out() {
+                PROBE_EVERY
+            } else {
+                (2 * self.probe_every).min(PROBE_EVERY_MOST)
+            };
+        }
     }
 }
 
@@ -354,14 +375,34 @@ mod tests {
         choice.record(false, 1e-3, 2e-3);
         // Out measured twice as fast as home: every worker.
         assert_eq!(choice.workers(0, 3, 10), 3);
-        // Out measured slower than home: home, until the next probe.
+        // Out measured slower than home: home, until the next probe, which
+        // waits twice as long after each step out that measured slower.
         choice.record(true, 1e-3, 9e-3);
         choice.record(true, 1e-3, 9e-3);
-        for _ in 0..PROBE_EVERY {
-            assert_eq!(choice.workers(0, 1, 10), 0);
-            choice.record(false, 1e-3, 2e-3);
+        let wait = |choice: &mut StageChoice| {
+            let mut home = 0;
+            while choice.workers(0, 1, 10) == 0 {
+                choice.record(false, 1e-3, 2e-3);
+                home += 1;
+                assert!(home <= PROBE_EVERY_MOST, "no probe");
+            }
+            home
+        };
+        assert_eq!(wait(&mut choice), 4 * PROBE_EVERY);
+        choice.record(true, 1e-3, 9e-3);
+        assert_eq!(wait(&mut choice), 8 * PROBE_EVERY);
+        for _ in 0..8 {
+            choice.record(true, 1e-3, 9e-3);
+        }
+        assert_eq!(wait(&mut choice), PROBE_EVERY_MOST);
+        // A probe that measures out faster again: out, and probes as often
+        // as at first once it is slower.
+        for _ in 0..8 {
+            choice.record(true, 1e-3, 1e-4);
         }
         assert_eq!(choice.workers(0, 1, 10), 1);
+        choice.record(true, 1e-3, 1e-1);
+        assert_eq!(wait(&mut choice), 2 * PROBE_EVERY);
         // One group, or no worker: home.
         assert_eq!(choice.workers(0, 1, 1), 0);
         assert_eq!(choice.workers(0, 0, 10), 0);
