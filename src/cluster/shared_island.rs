@@ -30,7 +30,7 @@ impl<'e, 'w> SharedBlocks<'e, 'w> {
     /// The blocks per slot by the greedy rule and each slot's measured
     /// speed at sweeping blocks (all alike until measured). Rank 0 takes
     /// a full share: the rows between blocks wait for every block.
-    fn plan(&self, rows: &[f64]) -> Vec<Vec<usize>> {
+    fn plan(&self, rows: &[usize]) -> Vec<Vec<usize>> {
         let speeds: Vec<f64> = self
             .exec
             .block_meters
@@ -38,8 +38,12 @@ impl<'e, 'w> SharedBlocks<'e, 'w> {
             .map(|m| m.speed())
             .map(|s| if s.is_finite() && s > 0.0 { s } else { 1.0 })
             .collect();
+        let costs: Vec<f64> = rows.iter().map(|&r| r as f64).collect();
         let mut plan = vec![Vec::new(); speeds.len()];
-        for (k, slot) in schedule::assign(rows, &speeds, 1.0).into_iter().enumerate() {
+        for (k, slot) in schedule::assign(&costs, &speeds, 1.0)
+            .into_iter()
+            .enumerate()
+        {
             plan[slot].push(k);
         }
         plan
@@ -53,15 +57,10 @@ impl<'e, 'w> SharedBlocks<'e, 'w> {
     }
 }
 
-impl BlockRunner for SharedBlocks<'_, '_> {
-    fn sweep_blocks(&mut self, blocks: &mut SweptBlocks, sweeps: usize) {
-        let rows: Vec<f64> = (0..blocks.blocks.len())
-            .map(|k| blocks.blocks.rows(k) as f64)
-            .collect();
-        if blocks.first {
-            self.plan = self.plan(&rows);
-        }
-        let rows_of = |mine: &[usize]| mine.iter().map(|&k| rows[k] as usize).sum::<usize>();
+impl SharedBlocks<'_, '_> {
+    /// Sends each worker its blocks' states (and, at the first round,
+    /// their systems) for `sweeps` sweeps.
+    fn hand_out(&mut self, blocks: &SweptBlocks, sweeps: usize) {
         for (slot, mine) in self.plan.iter().enumerate().skip(1) {
             if mine.is_empty() {
                 continue;
@@ -80,12 +79,11 @@ impl BlockRunner for SharedBlocks<'_, '_> {
                 },
             );
         }
-        let clock = Instant::now();
-        for &k in &self.plan[0] {
-            blocks.sweep_here(k, sweeps);
-        }
-        let own = rows_of(&self.plan[0]);
-        self.meter(0, own, sweeps, clock.elapsed().as_secs_f64());
+    }
+
+    /// Takes each worker's swept blocks back, in slot order, metering it
+    /// on `rows` (each block's).
+    fn gather(&mut self, blocks: &mut SweptBlocks, sweeps: usize, rows: &[usize]) {
         for slot in 1..self.plan.len() {
             let mine = std::mem::take(&mut self.plan[slot]);
             if mine.is_empty() {
@@ -95,7 +93,8 @@ impl BlockRunner for SharedBlocks<'_, '_> {
             let states = match self.exec.receive(rank) {
                 Reply::SweepBlocks { states, busy_s } if states.len() == mine.len() => {
                     self.exec.book[slot].busy_s += busy_s;
-                    self.meter(slot, rows_of(&mine), sweeps, busy_s);
+                    let swept = mine.iter().map(|&k| rows[k]).sum();
+                    self.meter(slot, swept, sweeps, busy_s);
                     states
                 }
                 _ => {
@@ -108,6 +107,25 @@ impl BlockRunner for SharedBlocks<'_, '_> {
             }
             self.plan[slot] = mine;
         }
+    }
+}
+
+impl BlockRunner for SharedBlocks<'_, '_> {
+    fn sweep_blocks(&mut self, blocks: &mut SweptBlocks, sweeps: usize) {
+        let rows: Vec<usize> = (0..blocks.blocks.len())
+            .map(|k| blocks.blocks.rows(k))
+            .collect();
+        if blocks.first {
+            self.plan = self.plan(&rows);
+        }
+        self.hand_out(blocks, sweeps);
+        let clock = Instant::now();
+        for &k in &self.plan[0] {
+            blocks.sweep_here(k, sweeps);
+        }
+        let own = self.plan[0].iter().map(|&k| rows[k]).sum();
+        self.meter(0, own, sweeps, clock.elapsed().as_secs_f64());
+        self.gather(blocks, sweeps, &rows);
         self.exec.dist.block_exchanges += 1;
     }
 }

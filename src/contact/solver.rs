@@ -417,7 +417,7 @@ mod tests {
     use crate::body::BodyId;
     use crate::contact::lcp;
     use crate::contact::methods::dantzig::RowFactorsOf;
-    use crate::contact::task::{fixed_body, stacked_cube};
+    use crate::contact::task::{fixed_body, resting_contact, stacked_cube};
     use nalgebra::Matrix3;
 
     /// A fixed floor and `n` 1 kg unit bodies stacked on it under gravity
@@ -461,20 +461,13 @@ mod tests {
         let mut contacts = Vec::new();
         for k in 0..n {
             for &(x, y) in points {
-                contacts.push(IslandContact {
-                    a: k as u32 + 1,
-                    b: k as u32,
-                    point: Vector3::new(x, y, k as f64),
-                    normal: Vector3::z(),
-                    restitution: 0.0,
+                contacts.push(resting_contact(
+                    k + 1,
+                    k,
+                    Vector3::new(x, y, k as f64),
+                    Vector3::z(),
                     friction,
-                    separation: 0.0,
-                    warm_force: 0.0,
-                    warm_friction: Vector3::zeros(),
-                    turns: NormalTurn::WithB,
-                    approach: 0.0,
-                    near: false,
-                });
+                ));
             }
         }
         IslandTask {

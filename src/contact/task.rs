@@ -218,6 +218,33 @@ impl SolveStats {
     }
 }
 
+/// A touching contact of bodies `a` on `b` at `point`, normal `normal`
+/// (out of B), no restitution, friction coefficient `friction`, no warm
+/// start.
+#[cfg(test)]
+pub(super) fn resting_contact(
+    a: usize,
+    b: usize,
+    point: Vector3<f64>,
+    normal: Vector3<f64>,
+    friction: f64,
+) -> IslandContact {
+    IslandContact {
+        a: a as u32,
+        b: b as u32,
+        point,
+        normal,
+        restitution: 0.0,
+        friction,
+        separation: 0.0,
+        warm_force: 0.0,
+        warm_friction: Vector3::zeros(),
+        turns: crate::collision::manifold::NormalTurn::WithB,
+        approach: 0.0,
+        near: false,
+    }
+}
+
 /// A fixed body (no inverse mass or inertia) at rest at `position`.
 #[cfg(test)]
 pub(super) fn fixed_body(position: Vector3<f64>) -> IslandBody {

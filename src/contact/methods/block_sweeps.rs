@@ -333,10 +333,9 @@ pub(in crate::contact) fn sweep(
 mod tests {
     use super::*;
     use crate::body::BodyId;
-    use crate::collision::manifold::NormalTurn;
     use crate::contact::methods::pile_sweeps::{self, PileSweepSettings, Sweeping};
     use crate::contact::system::{Phase, PhaseSystem};
-    use crate::contact::task::{IslandContact, IslandTask, fixed_body};
+    use crate::contact::task::{IslandContact, IslandTask, fixed_body, resting_contact};
     use nalgebra::Matrix3;
 
     /// A 1 kg unit cube at (x, y, ½) falling at 0.1 m/s.
@@ -353,20 +352,7 @@ mod tests {
     }
 
     fn contact(a: usize, b: usize, point: Vector3<f64>, normal: Vector3<f64>) -> IslandContact {
-        IslandContact {
-            a: a as u32,
-            b: b as u32,
-            point,
-            normal,
-            restitution: 0.0,
-            friction: 0.5,
-            separation: 0.0,
-            warm_force: 0.0,
-            warm_friction: Vector3::zeros(),
-            turns: NormalTurn::WithB,
-            approach: 0.0,
-            near: false,
-        }
+        resting_contact(a, b, point, normal, 0.5)
     }
 
     /// An `n`×`n` layer of unit cubes side by side on a fixed floor (body
