@@ -305,22 +305,26 @@ position = [0.6, 0.0, 0.11]
 angular_velocity = [0.0, 0.0, 2.0]
 "#;
 
+/// `text` written under `root` as the scene file `name`.
+fn scene_file(root: &Path, name: &str, text: &str) -> PathBuf {
+    let path = root.join(name);
+    std::fs::write(&path, text).unwrap_or_else(|e| panic!("writing {name}: {e}"));
+    path
+}
+
 /// The bundled pour with 100 bodies in its box, written under `root`.
 fn pour_of_100(root: &Path) -> PathBuf {
-    let nuts = root.join("nuts_and_bolts_100.toml");
     let bundled = std::fs::read_to_string(scene("nuts_and_bolts.toml")).unwrap();
     assert!(
         bundled.contains("\ncount = 20\n"),
         "the bundled pour's count moved"
     );
-    std::fs::write(&nuts, bundled.replace("\ncount = 20\n", "\ncount = 100\n")).unwrap();
-    nuts
+    let text = bundled.replace("\ncount = 20\n", "\ncount = 100\n");
+    scene_file(root, "nuts_and_bolts_100.toml", &text)
 }
 
 fn five_islands(root: &Path) -> PathBuf {
-    let path = root.join("five_islands.toml");
-    std::fs::write(&path, FIVE_ISLANDS).expect("writing the five-islands scene");
-    path
+    scene_file(root, "five_islands.toml", FIVE_ISLANDS)
 }
 
 #[test]
@@ -436,9 +440,7 @@ fn layer_of_cubes(root: &Path) -> PathBuf {
             text += &format!("\n[[bodies]]\nobject = \"cube\"\nposition = [{x}, {y}, {z}]\n");
         }
     }
-    let path = root.join("layer.toml");
-    std::fs::write(&path, text).expect("writing the layer scene");
-    path
+    scene_file(root, "layer.toml", &text)
 }
 
 /// A large island cut in blocks (`--island-blocks`) is swept by the ranks

@@ -103,7 +103,7 @@ impl MpiExecutor<'_> {
 
     /// Splits tasks by the greedy rule over rank 0 and the `k` fastest
     /// workers; returns per slot the task indices.
-    pub(super) fn plan(&self, costs: &[f64], k: usize, share: f64) -> Vec<Vec<usize>> {
+    fn plan(&self, costs: &[f64], k: usize, share: f64) -> Vec<Vec<usize>> {
         let used = schedule::fastest_slots(&self.speeds, k);
         let speeds: Vec<f64> = self
             .speeds

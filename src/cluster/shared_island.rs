@@ -55,9 +55,7 @@ impl<'e, 'w> SharedBlocks<'e, 'w> {
             self.exec.block_meters[slot].add((rows * sweeps) as f64, busy_s);
         }
     }
-}
 
-impl SharedBlocks<'_, '_> {
     /// Sends each worker its blocks' states (and, at the first round,
     /// their systems) for `sweeps` sweeps.
     fn hand_out(&mut self, blocks: &SweptBlocks, sweeps: usize) {

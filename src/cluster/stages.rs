@@ -117,14 +117,7 @@ impl MpiExecutor<'_> {
     fn solve_whole_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
         let units: Vec<f64> = tasks
             .iter()
-            .map(|t| {
-                let rows: usize = t
-                    .contacts
-                    .iter()
-                    .map(|c| if c.friction > 0.0 { 3 } else { 1 })
-                    .sum();
-                schedule::island_units(rows)
-            })
+            .map(|t| schedule::island_units(t.rows()))
             .collect();
         let costs: Vec<f64> = units.iter().map(|u| u * self.model.island_coef).collect();
         let total: f64 = costs.iter().sum();

@@ -56,18 +56,6 @@ pub fn solve_island(task: &IslandTask) -> IslandResult {
     solve_island_with(task, &mut InlineBlocks)
 }
 
-/// Whether the island's solve would sweep it by blocks: cut in blocks,
-/// with the rows and moving bodies for the large-island method
-/// (`policy::attempts`; each phase decides on its own rows, so this is
-/// where the blocks are worth handing to other ranks, not a promise).
-pub fn sweeps_by_blocks(task: &IslandTask) -> bool {
-    let settings = SolverSettings::default();
-    let moving = task.bodies.iter().filter(|b| b.inv_mass > 0.0).count();
-    task.island_blocks > 1
-        && task.rows() >= task.iterative_min_rows as usize
-        && moving > settings.large_island_bodies
-}
-
 /// The same, with `runner` sweeping the blocks of a large island cut in
 /// blocks (`IslandTask::island_blocks`): the same answer whoever sweeps them.
 pub fn solve_island_with(task: &IslandTask, runner: &mut dyn BlockRunner) -> IslandResult {
@@ -90,6 +78,18 @@ pub fn solve_island_with(task: &IslandTask, runner: &mut dyn BlockRunner) -> Isl
         r.carried.push(carried[k]);
     }
     r
+}
+
+/// Whether the island's solve would sweep it by blocks: cut in blocks,
+/// with the rows and moving bodies for the large-island method
+/// (`policy::attempts`; each phase decides on its own rows, so this is
+/// where the blocks are worth handing to other ranks, not a promise).
+pub fn sweeps_by_blocks(task: &IslandTask) -> bool {
+    let settings = SolverSettings::default();
+    let moving = task.bodies.iter().filter(|b| b.inv_mass > 0.0).count();
+    task.island_blocks > 1
+        && task.rows() >= task.iterative_min_rows as usize
+        && moving > settings.large_island_bodies
 }
 
 /// Contacts closer than this (metres) with normals closer than this count

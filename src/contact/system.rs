@@ -518,7 +518,7 @@ pub(super) struct IterativeSystem<'a> {
 
 /// The impulses of an iterative solve and the velocity changes they give
 /// the bodies (M⁻¹Jᵀp), kept in step.
-#[derive(Clone)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub(super) struct IterativeState {
     pub(super) p: Vec<f64>,
     pub(super) dv: Vec<Vector3<f64>>,

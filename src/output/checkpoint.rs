@@ -55,7 +55,7 @@ pub const MAGIC: &[u8; 8] = b"RSIMCKPT";
 /// its patches' hull vertices, so a run resumed by an older build would
 /// differ), `Counters::points_per_pair`, `speculative_pushes` and
 /// `speculative_ghosts`. 14: `Counters::toi_events_by_rollback`. 15:
-/// `Counters::overlap_repairs`.
+/// `Counters::overlap_repairs`. 16: `island_blocks`.
 pub const FORMAT: u32 = 16;
 const HEADER_BYTES: usize = 8 + 4 + 8 + 8;
 /// File name of the checkpoint in the run's output folder.

@@ -162,11 +162,7 @@ pub struct BlockSystem {
 /// One block's impulses and its bodies' velocity changes, numbered within
 /// the block: what travels each exchange.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct BlockState {
-    p: Vec<f64>,
-    dv: Vec<Vector3<f64>>,
-    dw: Vec<Vector3<f64>>,
-}
+pub struct BlockState(IterativeState);
 
 impl std::fmt::Debug for BlockSystem {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -187,19 +183,9 @@ impl BlockSystem {
             compliance: self.compliance,
             tolerance: 0.0,
         };
-        let mut s = IterativeState {
-            p: std::mem::take(&mut state.p),
-            dv: std::mem::take(&mut state.dv),
-            dw: std::mem::take(&mut state.dw),
-        };
         for _ in 0..sweeps {
-            system.sweep(&mut s);
+            system.sweep(&mut state.0);
         }
-        *state = BlockState {
-            p: s.p,
-            dv: s.dv,
-            dw: s.dw,
-        };
     }
 }
 
@@ -252,16 +238,17 @@ impl SweptBlocks<'_, '_> {
     /// Block k's impulses and velocity changes now.
     pub fn state_of(&self, k: usize) -> BlockState {
         let block = &self.blocks.blocks[k];
-        BlockState {
+        BlockState(IterativeState {
             p: block.rows.iter().map(|&i| self.state.p[i]).collect(),
             dv: block.bodies.iter().map(|&j| self.state.dv[j]).collect(),
             dw: block.bodies.iter().map(|&j| self.state.dw[j]).collect(),
-        }
+        })
     }
 
     /// Block k's impulses and velocity changes as a rank swept them.
     pub fn set_state(&mut self, k: usize, swept: &BlockState) {
         let block = &self.blocks.blocks[k];
+        let swept = &swept.0;
         for (&i, &p) in block.rows.iter().zip(&swept.p) {
             self.state.p[i] = p;
         }
