@@ -17,6 +17,8 @@ pub(super) struct SharedBlocks<'e, 'w> {
     exec: &'e mut MpiExecutor<'w>,
     /// Per slot (0: rank 0), the blocks it sweeps in this solve.
     plan: Vec<Vec<usize>>,
+    /// A round of the island's was shared already (its phases each sweep).
+    shared: bool,
 }
 
 impl<'e, 'w> SharedBlocks<'e, 'w> {
@@ -24,6 +26,7 @@ impl<'e, 'w> SharedBlocks<'e, 'w> {
         SharedBlocks {
             exec,
             plan: Vec::new(),
+            shared: false,
         }
     }
 
@@ -115,6 +118,10 @@ impl BlockRunner for SharedBlocks<'_, '_> {
             .collect();
         if blocks.first {
             self.plan = self.plan(&rows);
+        }
+        if !self.shared {
+            self.shared = true;
+            self.exec.dist.islands_shared += 1;
         }
         self.hand_out(blocks, sweeps);
         let clock = Instant::now();

@@ -101,7 +101,6 @@ impl MpiExecutor<'_> {
         }
         self.book[0].busy_s += started.elapsed().as_secs_f64();
         self.book[0].tasks_is += by_blocks.len() as u64;
-        self.dist.islands_shared += by_blocks.len() as u64;
         let mut tasks: Vec<Option<IslandTask>> = tasks.into_iter().map(Some).collect();
         let rest: Vec<IslandTask> = whole
             .iter()

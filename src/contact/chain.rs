@@ -4,7 +4,7 @@
 //! attempts after it; then the answer's checks (`guard`).
 
 use super::guard;
-use super::methods::block_sweeps::{BlockRunner, IslandBlocks};
+use super::methods::block_sweeps::{BlockRunner, BlockSweeps, IslandBlocks};
 use super::methods::dantzig::Dantzig;
 use super::methods::lcp::LcpError;
 use super::methods::pile_sweeps::Sweeping;
@@ -147,12 +147,11 @@ impl<'a> Chain<'a> {
 
     fn large_island(&mut self, last: bool, stats: &mut SolveStats) -> Option<Vec<f64>> {
         let sweeping = match &mut self.by_blocks {
-            Some(by) => Sweeping::Blocks {
-                blocks: IslandBlocks::cut(by.bodies, &self.system.rows, by.count),
-                runner: &mut *by.runner,
-                settings: self.settings.island_blocks,
-                first: true,
-            },
+            Some(by) => Sweeping::Blocks(BlockSweeps::new(
+                IslandBlocks::cut(by.bodies, &self.system.rows, by.count),
+                &mut *by.runner,
+                self.settings.island_blocks,
+            )),
             None => Sweeping::Whole,
         };
         let answer = pile_sweeps::solve(

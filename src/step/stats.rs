@@ -242,9 +242,10 @@ pub struct Distribution {
     /// times chose (or a probe), and those that stepped it whole.
     pub steps_split: u64,
     pub steps_kept_whole: u64,
-    /// Large islands cut in blocks that rank 0 solved with every worker
-    /// (`--island-blocks`, `solver::sweeps_by_blocks`,
-    /// `cluster::shared_island`), and the rounds of messages their sweeps
+    /// Large islands whose sweeps rank 0 shared with every worker by
+    /// blocks (`--island-blocks`, `solver::sweeps_by_blocks`,
+    /// `cluster::shared_island`; one whose solve ended before its first
+    /// sweep is not counted), and the rounds of messages their sweeps
     /// took.
     pub islands_shared: u64,
     pub block_exchanges: u64,

@@ -284,35 +284,57 @@ impl BlockRunner for InlineBlocks {
     }
 }
 
-/// `sweeps` sweeps of `system` by `blocks`: rounds of `exchange_every`
-/// sweeps of the blocks' own rows (by `runner`), each followed by as many
-/// of the rows between blocks.
-pub(in crate::contact) fn sweep(
-    system: &IterativeSystem,
-    state: &mut IterativeState,
-    blocks: &IslandBlocks,
-    runner: &mut dyn BlockRunner,
-    sweeps: usize,
-    settings: &BlockSweepSettings,
-    first: &mut bool,
-) {
-    let mut left = sweeps;
-    while left > 0 {
-        let round = left.min(settings.exchange_every.max(1));
-        runner.sweep_blocks(
-            &mut SweptBlocks {
-                blocks,
-                system,
-                state,
-                first: *first,
-            },
-            round,
-        );
-        *first = false;
-        for _ in 0..round {
-            system.sweep_rows(&blocks.between, state);
+/// One solve's sweeps by blocks: the island's blocks, who sweeps them,
+/// and how often they meet the rows between blocks.
+pub(in crate::contact) struct BlockSweeps<'r> {
+    blocks: IslandBlocks,
+    runner: &'r mut dyn BlockRunner,
+    settings: BlockSweepSettings,
+    /// No exchange made yet (the runner hands the blocks out at the first).
+    first: bool,
+}
+
+impl<'r> BlockSweeps<'r> {
+    pub fn new(
+        blocks: IslandBlocks,
+        runner: &'r mut dyn BlockRunner,
+        settings: BlockSweepSettings,
+    ) -> Self {
+        BlockSweeps {
+            blocks,
+            runner,
+            settings,
+            first: true,
         }
-        left -= round;
+    }
+
+    /// `sweeps` sweeps of `system`: rounds of `exchange_every` sweeps of
+    /// the blocks' own rows (by the runner), each followed by as many of
+    /// the rows between blocks.
+    pub(in crate::contact) fn sweep(
+        &mut self,
+        system: &IterativeSystem,
+        state: &mut IterativeState,
+        sweeps: usize,
+    ) {
+        let mut left = sweeps;
+        while left > 0 {
+            let round = left.min(self.settings.exchange_every.max(1));
+            self.runner.sweep_blocks(
+                &mut SweptBlocks {
+                    blocks: &self.blocks,
+                    system,
+                    state,
+                    first: self.first,
+                },
+                round,
+            );
+            self.first = false;
+            for _ in 0..round {
+                system.sweep_rows(&self.blocks.between, state);
+            }
+            left -= round;
+        }
     }
 }
 
@@ -462,12 +484,11 @@ mod tests {
         let iterative = system.iterative();
         let settings = PileSweepSettings::default();
         let solve = |runner: &mut dyn BlockRunner| {
-            let sweeping = Sweeping::Blocks {
-                blocks: IslandBlocks::cut(&task.bodies, &system.rows, 4),
+            let sweeping = Sweeping::Blocks(BlockSweeps::new(
+                IslandBlocks::cut(&task.bodies, &system.rows, 4),
                 runner,
-                settings: BlockSweepSettings::default(),
-                first: true,
-            };
+                BlockSweepSettings::default(),
+            ));
             pile_sweeps::solve(
                 &iterative,
                 &system.warm,
@@ -495,12 +516,12 @@ mod tests {
         let iterative = system.iterative();
         let settings = PileSweepSettings::default();
         let cut = IslandBlocks::cut(&task.bodies, &system.rows, 4);
-        let sweeping = Sweeping::Blocks {
-            blocks: cut,
-            runner: &mut InlineBlocks,
-            settings: BlockSweepSettings::default(),
-            first: true,
-        };
+        let mut inline = InlineBlocks;
+        let sweeping = Sweeping::Blocks(BlockSweeps::new(
+            cut,
+            &mut inline,
+            BlockSweepSettings::default(),
+        ));
         let by_blocks = pile_sweeps::solve(
             &iterative,
             &system.warm,

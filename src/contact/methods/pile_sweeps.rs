@@ -13,7 +13,7 @@
 //! such a solve at its budget, missing the conditions by millimetres a
 //! second on a few rows, which the next step's overlap recovery mends.
 
-use super::block_sweeps::{self, BlockRunner, BlockSweepSettings, IslandBlocks};
+use super::block_sweeps::BlockSweeps;
 use super::subspace;
 use crate::contact::system::{IterativeState, IterativeSystem, Step};
 
@@ -61,13 +61,7 @@ pub(crate) struct PileAnswer {
 /// ranks may share (`block_sweeps`).
 pub(crate) enum Sweeping<'r> {
     Whole,
-    Blocks {
-        blocks: IslandBlocks,
-        runner: &'r mut dyn BlockRunner,
-        settings: BlockSweepSettings,
-        /// No exchange made yet (the runner hands the blocks out at the first).
-        first: bool,
-    },
+    Blocks(BlockSweeps<'r>),
 }
 
 impl Sweeping<'_> {
@@ -78,12 +72,7 @@ impl Sweeping<'_> {
                     system.sweep(state);
                 }
             }
-            Sweeping::Blocks {
-                blocks,
-                runner,
-                settings,
-                first,
-            } => block_sweeps::sweep(system, state, blocks, *runner, sweeps, settings, first),
+            Sweeping::Blocks(blocks) => blocks.sweep(system, state, sweeps),
         }
     }
 }
