@@ -1267,6 +1267,40 @@ fn check_event_shared_bound(d: &serde_json::Value) {
     assert!(events >= 1.0, "events a loop holds at a time: {events}");
 }
 
+/// With a large island cut in blocks, `--predict` counts its sweeps as
+/// the ranks would share them (`cluster::predict::blocked_s`): over a fast
+/// link the layer's island solves take less on 4 ranks than on 2 (its 4
+/// blocks on as many ranks), where swept whole the one island a step
+/// cannot be shared at all.
+#[test]
+fn the_prediction_shares_an_islands_blocks() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = layer_of_cubes(root.path());
+    let fast = ["--link-latency-us", "1", "--link-bytes-per-s", "1e9"];
+    let island_s = |name: &str, blocks: &str| -> Vec<f64> {
+        let mut args = vec!["--no-render", "--predict", "--island-blocks", blocks];
+        args.extend(fast);
+        let r = run(root.path(), name, Ranks::Alone, &scene, &args);
+        r.summary["distributed"]["predicted"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["by_stage"]["island_solves_s"].as_f64().unwrap())
+            .collect()
+    };
+    let blocks = island_s("blocks", "4");
+    assert!(
+        blocks[1] < blocks[0] && blocks[2] == blocks[1],
+        "2, 4, 8, 16 ranks: {blocks:?}"
+    );
+    let whole = island_s("whole", "1");
+    assert!(
+        whole.iter().all(|&s| s == whole[0]),
+        "2, 4, 8, 16 ranks: {whole:?}"
+    );
+}
+
 /// A one-rank run with `--predict` predicts the whole step on 2 to 16
 /// ranks from its own tasks (`distributed.predicted`, `cluster::predict`):
 /// never slower than one rank (a stage stays home where sharing it does

@@ -10,11 +10,14 @@
 //! large groups) as `scatter.rs` hands out chunks, the narrowphase by the
 //! greedy plan (`schedule::assign`). Every message crosses rank 0's one
 //! link, one after another (`schedule::Link`). Groups count as the run
-//! stepped them: whole, or split into parts with `--split-groups`.
+//! stepped them: whole, or split into parts with `--split-groups`. Large
+//! islands cut in blocks (`--island-blocks`) count as `shared_island`
+//! shares them, round by round over every rank: in the island stage, and
+//! in the group steps rank 0 keeps.
 
 use super::scatter::{CHUNK_SHARE, COORDINATOR_SHARE};
 use super::schedule;
-use crate::step::profile::{StageCall, StageKind, StepProfile, StepSink, TaskCost};
+use crate::step::profile::{BlockRound, StageCall, StageKind, StepProfile, StepSink, TaskCost};
 use crate::step::stats::{
     BOUND_RANKS, Distribution, PredictedRanks, PredictedStages, PredictionLink,
 };
@@ -132,24 +135,75 @@ const MOST_RANKS: usize = BOUND_RANKS[BOUND_RANKS.len() - 1] as usize;
 /// Seconds one stage call takes on 1, 2, … `most` ranks: alone, or shared
 /// with as many workers as is fastest (the scheduler chooses how many,
 /// `schedule::workers_to_use_over_link`, and keeps a stage home where
-/// none pays). Each rank count's sharing is simulated once.
+/// none pays). Alone on several ranks, rank 0 still shares its large
+/// islands' sweeps by blocks (`blocked_s`). Each rank count's sharing is
+/// simulated once.
 fn stage_s_up_to(call: &StageCall, most: usize, link: &LinkModel) -> Vec<f64> {
+    if call.kind == StageKind::IslandSolves && call.tasks.iter().any(|t| t.by_blocks) {
+        return islands_by_blocks_up_to(call, most, link);
+    }
     let alone: f64 = call.tasks.iter().map(|t| t.seconds).sum();
     let mut best = vec![alone; most];
-    if call.tasks.len() < 2 {
-        return best;
-    }
     let order = largest_first(&call.tasks);
     for r in 2..=most {
-        let shared = match call.kind {
-            StageKind::Narrowphase => planned_s(&call.tasks, r, link),
-            StageKind::IslandSolves | StageKind::GroupSteps | StageKind::PreparePairs => {
-                self_scheduled_s(&call.tasks, &order, r, link)
+        let home: f64 = call.tasks.iter().map(|t| blocked_s(t, r, link)).sum();
+        let shared = if call.tasks.len() < 2 {
+            f64::INFINITY
+        } else {
+            match call.kind {
+                StageKind::Narrowphase => planned_s(&call.tasks, r, link),
+                StageKind::IslandSolves | StageKind::GroupSteps | StageKind::PreparePairs => {
+                    self_scheduled_s(&call.tasks, &order, r, link)
+                }
             }
         };
-        best[r - 1] = best[r - 2].min(shared);
+        best[r - 1] = best[r - 2].min(home).min(shared);
     }
     best
+}
+
+/// An island stage with islands the ranks share by blocks
+/// (`cluster::stages`): on several ranks rank 0 solves those first, each
+/// with every worker, then the others as any island stage.
+fn islands_by_blocks_up_to(call: &StageCall, most: usize, link: &LinkModel) -> Vec<f64> {
+    let (blocked, rest): (Vec<TaskCost>, Vec<TaskCost>) =
+        call.tasks.iter().cloned().partition(|t| t.by_blocks);
+    let rest = StageCall {
+        kind: StageKind::IslandSolves,
+        tasks: rest,
+    };
+    let rest_s = stage_s_up_to(&rest, most, link);
+    (1..=most)
+        .map(|r| blocked.iter().map(|t| blocked_s(t, r, link)).sum::<f64>() + rest_s[r - 1])
+        .collect()
+}
+
+/// A task's seconds with its large islands' sweeps shared by blocks over
+/// `ranks` ranks (`cluster::shared_island`): all but the block sweeps as
+/// measured, then each round as rank 0 runs it (`round_s`). One rank, or
+/// a task without rounds: its seconds.
+fn blocked_s(task: &TaskCost, ranks: usize, link: &LinkModel) -> f64 {
+    if ranks < 2 || task.rounds.is_empty() {
+        return task.seconds;
+    }
+    let rounds: f64 = task.rounds.iter().map(|r| round_s(r, ranks, link)).sum();
+    task.seconds - task.swept_s() + rounds
+}
+
+/// One round of block sweeps on `ranks` ranks: the blocks planned by
+/// their rows over the ranks (`schedule::assign`, rank 0 at a full share,
+/// as `shared_island` plans them), each worker's sent and answered over
+/// rank 0's link.
+fn round_s(round: &BlockRound, ranks: usize, link: &LinkModel) -> f64 {
+    let rows: Vec<f64> = round.blocks.iter().map(|b| b.rows as f64).collect();
+    let slot = schedule::assign(&rows, &vec![1.0; ranks], 1.0);
+    let mut load = vec![0.0; ranks];
+    let mut bytes = vec![0u64; ranks];
+    for (block, &r) in round.blocks.iter().zip(&slot) {
+        load[r] += block.seconds;
+        bytes[r] += block.bytes;
+    }
+    slots_s(&load, &bytes, link)
 }
 
 /// Rank 0's link, which carries one message at a time.
@@ -222,11 +276,18 @@ fn planned_s(tasks: &[TaskCost], ranks: usize, link: &LinkModel) -> f64 {
         load[r] += task.seconds;
         bytes[r] += task.bytes;
     }
+    slots_s(&load, &bytes, link)
+}
+
+/// Rank 0's `load[0]` beside each worker's: its `bytes` over rank 0's link
+/// after the workers' before it, its load, its answer back. A worker with
+/// no bytes has nothing to do.
+fn slots_s(load: &[f64], bytes: &[u64], link: &LinkModel) -> f64 {
     let mut shared = SharedLink {
         model: link,
         free_at: 0.0,
     };
-    (1..ranks)
+    (1..load.len())
         .filter(|&r| bytes[r] > 0)
         .map(|r| shared.send(0.0, bytes[r]) + load[r] + link.latency_s)
         .fold(load[0], f64::max)
@@ -247,6 +308,7 @@ fn largest_first(tasks: &[TaskCost]) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::step::profile::BlockWork;
 
     /// Seconds one stage call takes on up to `ranks` ranks.
     fn stage_s(call: &StageCall, ranks: usize, link: &LinkModel) -> f64 {
@@ -256,7 +318,11 @@ mod tests {
     fn tasks(seconds: &[f64], bytes: u64) -> Vec<TaskCost> {
         seconds
             .iter()
-            .map(|&seconds| TaskCost { seconds, bytes })
+            .map(|&seconds| TaskCost {
+                seconds,
+                bytes,
+                ..Default::default()
+            })
             .collect()
     }
 
@@ -364,5 +430,65 @@ mod tests {
         for p in &d.predicted {
             assert!((p.by_stage.total_s() - p.wall_s).abs() <= 1e-12 * p.wall_s);
         }
+    }
+
+    /// An island of 10 s whose 8 s of sweeps are one round of four equal
+    /// blocks (of 2 s and `bytes` each).
+    fn blocked_island(bytes: u64) -> TaskCost {
+        let block = BlockWork {
+            rows: 300,
+            seconds: 2.0,
+            bytes,
+        };
+        TaskCost {
+            seconds: 10.0,
+            bytes: 1000,
+            by_blocks: true,
+            rounds: vec![BlockRound {
+                blocks: vec![block; 4],
+            }],
+        }
+    }
+
+    /// Its blocks shared over a free link: the 2 s that are not block
+    /// sweeps stay on rank 0, the round divides by the ranks; the island
+    /// stage's other islands follow it.
+    #[test]
+    fn an_island_shared_by_blocks_divides_its_sweeps() {
+        let mut call = StageCall {
+            kind: StageKind::IslandSolves,
+            tasks: vec![blocked_island(0)],
+        };
+        assert_eq!(stage_s(&call, 1, &FREE), 10.0);
+        assert_eq!(stage_s(&call, 2, &FREE), 6.0);
+        assert_eq!(stage_s(&call, 4, &FREE), 4.0);
+        call.tasks.extend(tasks(&[1.0, 1.0], 10));
+        assert_eq!(stage_s(&call, 2, &FREE), 7.0);
+        // As a group step's islands, where rank 0 keeps the group.
+        let group = StageCall {
+            kind: StageKind::GroupSteps,
+            tasks: vec![TaskCost {
+                by_blocks: false,
+                ..blocked_island(0)
+            }],
+        };
+        assert_eq!(stage_s(&group, 4, &FREE), 4.0);
+    }
+
+    /// The blocks' states cross rank 0's link each round, and the island
+    /// stage shares them whatever they cost: at 1 MB a block over 1 MB/s
+    /// two ranks take 8 s where a free link gives 6.
+    #[test]
+    fn a_rounds_bytes_cross_the_link() {
+        let call = StageCall {
+            kind: StageKind::IslandSolves,
+            tasks: vec![blocked_island(1_000_000)],
+        };
+        let link = LinkModel {
+            latency_s: 0.0,
+            bytes_per_s: 1e6,
+        };
+        // Rank 0: 2 s + 4 s of its blocks; the worker: 2 s of bytes, 4 s.
+        assert_eq!(stage_s(&call, 2, &link), 2.0 + 6.0);
     }
 }

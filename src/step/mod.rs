@@ -62,7 +62,7 @@ use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
-use profile::{Profiler, StageKind, StepSink, wire_bytes};
+use profile::{BlockRound, Profiler, StageKind, StepSink, TaskCost, TimedBlocks, wire_bytes};
 use region::{Gathered, Region};
 use serde::Serialize;
 use stats::{Distribution, GroupWork, RankSummary};
@@ -80,6 +80,9 @@ pub struct Inline {
     /// Records the outermost stage calls' tasks, where the run asks for
     /// the speed-up on several ranks (`Inline::profiled`).
     profiler: Option<Profiler>,
+    /// With a profiler: the block rounds of the islands a group step under
+    /// way solved, which its task takes.
+    group_rounds: Option<Vec<BlockRound>>,
 }
 
 impl Inline {
@@ -87,8 +90,36 @@ impl Inline {
     pub fn profiled(sink: Box<dyn StepSink>) -> Self {
         Inline {
             profiler: Some(Profiler::new(sink)),
+            group_rounds: Some(Vec::new()),
             ..Default::default()
         }
+    }
+
+    /// Solves each island with its block rounds timed (`TimedBlocks`): an
+    /// outermost call records each island as a task, one inside a group
+    /// step adds the rounds to the group's.
+    fn solve_islands_timed(&mut self, tasks: &[IslandTask]) -> Vec<IslandResult> {
+        let mut answers = Vec::with_capacity(tasks.len());
+        for task in tasks {
+            let started = Instant::now();
+            let mut timed = TimedBlocks::default();
+            let answer = solver::solve_island_with(task, &mut timed);
+            match (&mut self.profiler, &mut self.group_rounds) {
+                (Some(p), _) => p.add(TaskCost {
+                    seconds: started.elapsed().as_secs_f64(),
+                    bytes: wire_bytes(task) + wire_bytes(&answer),
+                    by_blocks: solver::sweeps_by_blocks(task),
+                    rounds: timed.rounds,
+                }),
+                (None, Some(rounds)) => rounds.extend(timed.rounds),
+                (None, None) => {}
+            }
+            answers.push(answer);
+        }
+        if let Some(p) = &mut self.profiler {
+            p.end_call(StageKind::IslandSolves);
+        }
+        answers
     }
 
     /// Runs `f` on each task; with a profiler, as one stage call of `kind`.
@@ -133,7 +164,11 @@ impl Executor for Inline {
         let clock = Instant::now();
         self.island_tasks += tasks.len() as u64;
         self.dist.solve_local += 1;
-        let r = self.each(StageKind::IslandSolves, &tasks, solver::solve_island);
+        let r = if self.group_rounds.is_some() {
+            self.solve_islands_timed(&tasks)
+        } else {
+            self.each(StageKind::IslandSolves, &tasks, solver::solve_island)
+        };
         self.busy_s += clock.elapsed().as_secs_f64();
         self.dist.distributable_s += self.clock.leave();
         r
@@ -156,7 +191,12 @@ impl Executor for Inline {
                 let asked = profiler.is_some().then(|| wire_bytes(&input));
                 let reply = group::run_group(st, input, self);
                 if let (Some(p), Some(asked)) = (&mut profiler, asked) {
-                    p.task_of(started, asked + wire_bytes(&reply));
+                    p.add(TaskCost {
+                        seconds: started.elapsed().as_secs_f64(),
+                        bytes: asked + wire_bytes(&reply),
+                        by_blocks: false,
+                        rounds: self.group_rounds.replace(Vec::new()).unwrap_or_default(),
+                    });
                 }
                 reply
             })

@@ -5,6 +5,7 @@
 //! would give; the step itself never reads it.
 
 use super::stats::Distribution;
+use crate::contact::block_sweeps::{BlockRunner, SweptBlocks};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -18,11 +19,84 @@ pub enum StageKind {
 }
 
 /// One task of a stage call, as it ran here.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct TaskCost {
     pub seconds: f64,
     /// Its request and its answer, encoded as the cluster sends them.
     pub bytes: u64,
+    /// An island solve that several ranks would share by blocks
+    /// (`contact::solver::sweeps_by_blocks`): rank 0 solves it with every
+    /// worker, never sends it whole.
+    pub by_blocks: bool,
+    /// The rounds of block sweeps of the task's large islands, in order
+    /// (an island solve's own; a group step's, of the islands it solved).
+    pub rounds: Vec<BlockRound>,
+}
+
+/// One round of a large island's sweeps by blocks (`contact::block_sweeps`)
+/// as it ran here, block by block.
+#[derive(Clone, Debug, Default)]
+pub struct BlockRound {
+    pub blocks: Vec<BlockWork>,
+}
+
+/// One block's part of a round.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BlockWork {
+    /// Its rows, by which the ranks share the blocks out.
+    pub rows: usize,
+    pub seconds: f64,
+    /// Its state to a worker and back, and at a solve's first round its
+    /// system, encoded as the cluster sends them.
+    pub bytes: u64,
+}
+
+impl TaskCost {
+    /// Seconds of the task's block sweeps.
+    pub fn swept_s(&self) -> f64 {
+        self.rounds
+            .iter()
+            .flat_map(|r| &r.blocks)
+            .map(|b| b.seconds)
+            .sum()
+    }
+}
+
+/// Sweeps every block here in turn, as `InlineBlocks` does, and records
+/// each round (`--predict`). The bytes of a block's state are counted at
+/// the solve's first round, with its system, and stand for every round.
+#[derive(Default)]
+pub struct TimedBlocks {
+    pub rounds: Vec<BlockRound>,
+    /// Per block, the bytes of its state there and back.
+    state_bytes: Vec<u64>,
+}
+
+impl BlockRunner for TimedBlocks {
+    fn sweep_blocks(&mut self, blocks: &mut SweptBlocks, sweeps: usize) {
+        let count = blocks.blocks.len();
+        if blocks.first {
+            self.state_bytes = (0..count)
+                .map(|k| 2 * wire_bytes(&blocks.state_of(k)))
+                .collect();
+        }
+        let mut round = BlockRound::default();
+        for k in 0..count {
+            let opened = if blocks.first {
+                wire_bytes(&blocks.system_of(k))
+            } else {
+                0
+            };
+            let started = Instant::now();
+            blocks.sweep_here(k, sweeps);
+            round.blocks.push(BlockWork {
+                rows: blocks.blocks.rows(k),
+                seconds: started.elapsed().as_secs_f64(),
+                bytes: self.state_bytes[k] + opened,
+            });
+        }
+        self.rounds.push(round);
+    }
 }
 
 /// One outermost call of a distributable stage.
@@ -91,10 +165,16 @@ impl Profiler {
 
     /// Adds a task of the call under way that took `bytes` of messages.
     pub(crate) fn task_of(&mut self, started: Instant, bytes: u64) {
-        self.call.push(TaskCost {
+        self.add(TaskCost {
             seconds: started.elapsed().as_secs_f64(),
             bytes,
+            ..Default::default()
         });
+    }
+
+    /// Adds a task of the call under way, as measured.
+    pub(crate) fn add(&mut self, task: TaskCost) {
+        self.call.push(task);
     }
 
     /// Ends the call under way.
