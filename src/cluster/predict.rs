@@ -222,13 +222,15 @@ impl SharedLink<'_> {
     }
 }
 
-/// Self-scheduling (`scatter.rs`): the tasks largest first; rank 0 takes
-/// one at a time from the back, each worker a chunk from the front of at
-/// least `CHUNK_SHARE` of its share of what is left, the next chunk one
-/// round trip after it answers. Every rank as fast as this one.
+/// Self-scheduling (`scatter.rs`): the tasks largest first by what the
+/// scheduler knows of them (`TaskCost::known`); rank 0 takes one at a time
+/// from the back, each worker a chunk from the front of at least
+/// `CHUNK_SHARE` of its share of what is known to be left, the next chunk
+/// one round trip after it answers; each task takes the seconds it took.
+/// Every rank as fast as this one.
 fn self_scheduled_s(tasks: &[TaskCost], order: &[usize], ranks: usize, link: &LinkModel) -> f64 {
     let (mut front, mut back) = (0, order.len());
-    let mut left: f64 = tasks.iter().map(|t| t.seconds).sum();
+    let mut left: f64 = tasks.iter().map(TaskCost::known).sum();
     let mut rank0 = 0.0_f64;
     let mut worker_free = vec![0.0_f64; ranks - 1];
     let mut shared = SharedLink {
@@ -245,19 +247,20 @@ fn self_scheduled_s(tasks: &[TaskCost], order: &[usize], ranks: usize, link: &Li
             .expect("at least one worker");
         if rank0 <= t {
             back -= 1;
-            let cost = tasks[order[back]].seconds;
-            rank0 += cost;
-            left -= cost;
+            rank0 += tasks[order[back]].seconds;
+            left -= tasks[order[back]].known();
             continue;
         }
         let want = CHUNK_SHARE * left / ranks as f64;
-        let (first, mut cost, mut bytes) = (front, 0.0, 0);
-        while front < back && (front == first || cost < want) {
-            cost += tasks[order[front]].seconds;
-            bytes += tasks[order[front]].bytes;
+        let (first, mut known, mut cost, mut bytes) = (front, 0.0, 0.0, 0);
+        while front < back && (front == first || known < want) {
+            let task = &tasks[order[front]];
+            known += task.known();
+            cost += task.seconds;
+            bytes += task.bytes;
             front += 1;
         }
-        left -= cost;
+        left -= known;
         let done = shared.send(t, bytes) + cost;
         answered = answered.max(done + link.latency_s);
         worker_free[w] = done + 2.0 * link.latency_s;
@@ -293,13 +296,13 @@ fn slots_s(load: &[f64], bytes: &[u64], link: &LinkModel) -> f64 {
         .fold(load[0], f64::max)
 }
 
-/// Task indices by decreasing seconds, ties by index.
+/// Task indices by decreasing estimate (`TaskCost::known`), ties by index.
 fn largest_first(tasks: &[TaskCost]) -> Vec<usize> {
     let mut order: Vec<usize> = (0..tasks.len()).collect();
     order.sort_by(|&i, &j| {
         tasks[j]
-            .seconds
-            .total_cmp(&tasks[i].seconds)
+            .known()
+            .total_cmp(&tasks[i].known())
             .then(i.cmp(&j))
     });
     order
@@ -447,6 +450,7 @@ mod tests {
             rounds: vec![BlockRound {
                 blocks: vec![block; 4],
             }],
+            ..Default::default()
         }
     }
 
@@ -490,5 +494,21 @@ mod tests {
         };
         // Rank 0: 2 s + 4 s of its blocks; the worker: 2 s of bytes, 4 s.
         assert_eq!(stage_s(&call, 2, &link), 2.0 + 6.0);
+    }
+
+    /// The scheduler orders and cuts tasks by its estimates, and pays for
+    /// those that were off: a 4 s group estimated as the smallest reaches
+    /// the worker last, and two ranks take 5 s where 4 s would do.
+    #[test]
+    fn tasks_go_out_by_their_estimates() {
+        let mut call = StageCall {
+            kind: StageKind::GroupSteps,
+            tasks: tasks(&[4.0, 1.0, 1.0, 1.0, 1.0], 0),
+        };
+        assert_eq!(stage_s(&call, 2, &FREE), 4.0);
+        for (task, estimate) in call.tasks.iter_mut().zip([1.0, 1.0, 1.0, 1.0, 4.0]) {
+            task.estimate = estimate;
+        }
+        assert_eq!(stage_s(&call, 2, &FREE), 5.0);
     }
 }

@@ -61,12 +61,6 @@ pub fn pair_units(
         }
 }
 
-/// Dantzig cost of a system: cubic in its rows, plus the linear building work.
-pub fn island_units(rows: usize) -> f64 {
-    let r = rows as f64;
-    r * r * r + 20.0 * r
-}
-
 impl CostModel {
     /// Seconds per unit as a ratio of smoothed sums: a batch of a few tiny
     /// tasks (mostly fixed overhead) cannot swing the estimate.

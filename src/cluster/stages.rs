@@ -114,10 +114,7 @@ impl MpiExecutor<'_> {
 
     /// The stage's islands, each solved whole on one rank.
     fn solve_whole_islands(&mut self, tasks: Vec<IslandTask>) -> Vec<IslandResult> {
-        let units: Vec<f64> = tasks
-            .iter()
-            .map(|t| schedule::island_units(t.rows()))
-            .collect();
+        let units: Vec<f64> = tasks.iter().map(IslandTask::cost_units).collect();
         let costs: Vec<f64> = units.iter().map(|u| u * self.model.island_coef).collect();
         let total: f64 = costs.iter().sum();
         // Self-scheduled: rank 0 works at its full speed (as for groups).

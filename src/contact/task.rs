@@ -95,6 +95,14 @@ impl IslandTask {
             .map(|c| if c.friction > 0.0 { 3 } else { 1 })
             .sum()
     }
+
+    /// What the scheduler estimates its solve by (`cluster::schedule`'s
+    /// cost model): Dantzig's cost, cubic in its rows, plus the linear
+    /// building work.
+    pub fn cost_units(&self) -> f64 {
+        let r = self.rows() as f64;
+        r * r * r + 20.0 * r
+    }
 }
 
 /// Contact reply: per body (same order as the task), the impulse applied at

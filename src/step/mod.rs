@@ -108,6 +108,7 @@ impl Inline {
                 (Some(p), _) => p.add(TaskCost {
                     seconds: started.elapsed().as_secs_f64(),
                     bytes: wire_bytes(task) + wire_bytes(&answer),
+                    estimate: task.cost_units(),
                     by_blocks: solver::sweeps_by_blocks(task),
                     rounds: timed.rounds,
                 }),
@@ -189,11 +190,13 @@ impl Executor for Inline {
             .map(|input| {
                 let started = Instant::now();
                 let asked = profiler.is_some().then(|| wire_bytes(&input));
+                let estimate = input.predicted_s();
                 let reply = group::run_group(st, input, self);
                 if let (Some(p), Some(asked)) = (&mut profiler, asked) {
                     p.add(TaskCost {
                         seconds: started.elapsed().as_secs_f64(),
                         bytes: asked + wire_bytes(&reply),
+                        estimate,
                         by_blocks: false,
                         rounds: self.group_rounds.replace(Vec::new()).unwrap_or_default(),
                     });

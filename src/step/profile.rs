@@ -24,6 +24,10 @@ pub struct TaskCost {
     pub seconds: f64,
     /// Its request and its answer, encoded as the cluster sends them.
     pub bytes: u64,
+    /// What the scheduler knows of it beforehand, in its stage's own
+    /// units (an island's `cost_units`, a group's `predicted_s`): what it
+    /// orders and cuts the tasks by. 0: unknown, its seconds stand in.
+    pub estimate: f64,
     /// An island solve that several ranks would share by blocks
     /// (`contact::solver::sweeps_by_blocks`): rank 0 solves it with every
     /// worker, never sends it whole.
@@ -52,6 +56,15 @@ pub struct BlockWork {
 }
 
 impl TaskCost {
+    /// What the scheduler orders and cuts it by (`estimate`).
+    pub fn known(&self) -> f64 {
+        if self.estimate > 0.0 {
+            self.estimate
+        } else {
+            self.seconds
+        }
+    }
+
     /// Seconds of the task's block sweeps.
     pub fn swept_s(&self) -> f64 {
         self.rounds
