@@ -166,15 +166,19 @@ fn stage_s_up_to(call: &StageCall, most: usize, link: &LinkModel) -> Vec<f64> {
 /// (`cluster::stages`): on several ranks rank 0 solves those first, each
 /// with every worker, then the others as any island stage.
 fn islands_by_blocks_up_to(call: &StageCall, most: usize, link: &LinkModel) -> Vec<f64> {
-    let (blocked, rest): (Vec<TaskCost>, Vec<TaskCost>) =
-        call.tasks.iter().cloned().partition(|t| t.by_blocks);
     let rest = StageCall {
         kind: StageKind::IslandSolves,
-        tasks: rest,
+        tasks: call
+            .tasks
+            .iter()
+            .filter(|t| !t.by_blocks)
+            .cloned()
+            .collect(),
     };
     let rest_s = stage_s_up_to(&rest, most, link);
+    let blocked = || call.tasks.iter().filter(|t| t.by_blocks);
     (1..=most)
-        .map(|r| blocked.iter().map(|t| blocked_s(t, r, link)).sum::<f64>() + rest_s[r - 1])
+        .map(|r| blocked().map(|t| blocked_s(t, r, link)).sum::<f64>() + rest_s[r - 1])
         .collect()
 }
 

@@ -104,16 +104,16 @@ impl Inline {
             let started = Instant::now();
             let mut timed = TimedBlocks::default();
             let answer = solver::solve_island_with(task, &mut timed);
-            match (&mut self.profiler, &mut self.group_rounds) {
-                (Some(p), _) => p.add(TaskCost {
+            if let Some(p) = &mut self.profiler {
+                p.add(TaskCost {
                     seconds: started.elapsed().as_secs_f64(),
                     bytes: wire_bytes(task) + wire_bytes(&answer),
                     estimate: task.cost_units(),
                     by_blocks: solver::sweeps_by_blocks(task),
                     rounds: timed.rounds,
-                }),
-                (None, Some(rounds)) => rounds.extend(timed.rounds),
-                (None, None) => {}
+                });
+            } else if let Some(rounds) = &mut self.group_rounds {
+                rounds.extend(timed.rounds);
             }
             answers.push(answer);
         }
