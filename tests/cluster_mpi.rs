@@ -427,10 +427,15 @@ fn split_groups_give_the_same_result_on_1_and_3_ranks() {
 /// island of 64 moving bodies and about 1 500 rows from the first step, so
 /// that the large-island method solves it each step.
 fn layer_of_cubes(root: &Path) -> PathBuf {
-    let mut text = String::from(
-        "[world]\ndt = 0.01\nduration = 0.3\n\n\
-         [objects.floor]\nshape = { box = { half_extents = [1.0, 1.0, 0.1] } }\nmass = 1.0\nfriction = 0.5\n\n\
-         [objects.cube]\nshape = { box = { half_extents = [0.05, 0.05, 0.05] } }\nmass = 1.0\nfriction = 0.5\n\n\
+    scene_file(root, "layer.toml", &layer_text(0.3))
+}
+
+/// The layer of cubes for `duration` simulated seconds.
+fn layer_text(duration: f64) -> String {
+    let mut text = format!(
+        "[world]\ndt = 0.01\nduration = {duration}\n\n\
+         [objects.floor]\nshape = {{ box = {{ half_extents = [1.0, 1.0, 0.1] }} }}\nmass = 1.0\nfriction = 0.5\n\n\
+         [objects.cube]\nshape = {{ box = {{ half_extents = [0.05, 0.05, 0.05] }} }}\nmass = 1.0\nfriction = 0.5\n\n\
          [[bodies]]\nobject = \"floor\"\nposition = [0.0, 0.0, -0.1]\nfixed = true\n",
     );
     for i in 0..8 {
@@ -440,12 +445,21 @@ fn layer_of_cubes(root: &Path) -> PathBuf {
             text += &format!("\n[[bodies]]\nobject = \"cube\"\nposition = [{x}, {y}, {z}]\n");
         }
     }
-    scene_file(root, "layer.toml", &text)
+    text
+}
+
+/// Each rank's `block_rows_swept` (rows times sweeps of shared blocks).
+fn block_rows(run: &Run) -> Vec<u64> {
+    run.per_rank()
+        .iter()
+        .map(|r| r["block_rows_swept"].as_u64().unwrap_or(0))
+        .collect()
 }
 
 /// A large island cut in blocks (`--island-blocks`) is swept by the ranks
-/// together, and ends where one rank sweeping every block ends: on 1, 2
-/// and 3 ranks and without mpirun. Cut in blocks, it ends elsewhere than
+/// together, and ends where one rank sweeping every block ends: on 1, 2,
+/// 3 and 5 ranks, with `--force-distribute`, with the render rank, and
+/// without mpirun. Cut in blocks, it ends elsewhere than
 /// swept whole (the rows' order changed), so the blocks were used.
 #[test]
 fn an_island_shared_by_blocks_ends_as_on_one_rank() {
@@ -468,29 +482,126 @@ fn an_island_shared_by_blocks_ends_as_on_one_rank() {
     assert_ne!(reference.state_hash(), whole.state_hash());
     let alone = run(root.path(), "alone", Ranks::Alone, &scene, &args);
     assert_same_result(&reference, &alone);
-    for np in [2, 3] {
-        let other = run(
-            root.path(),
-            &format!("np{np}"),
-            Ranks::Np(np),
-            &scene,
-            &args,
-        );
+    let forced = [&args[..], &["--force-distribute"]].concat();
+    for (label, np, args) in [
+        ("np2", 2, &args[..]),
+        ("np3", 3, &args[..]),
+        ("np5", 5, &args[..]),
+        ("np3-forced", 3, &forced[..]),
+    ] {
+        let other = run(root.path(), label, Ranks::Np(np), &scene, args);
         assert!(
             other.count(&["distributed", "islands_shared"]) > 0
                 && other.count(&["distributed", "block_exchanges"]) > 0,
             "{}: no island was shared by blocks",
             other.what
         );
+        // Four blocks: the first four ranks sweep one each (at 5 ranks the
+        // fifth none).
+        let rows = block_rows(&other);
         assert!(
-            other.per_rank()[1..]
-                .iter()
-                .all(|r| r["busy_s"].as_f64().unwrap() > 0.0),
-            "{}: a worker swept nothing: {:?}",
-            other.what,
-            other.per_rank()
+            rows.iter().take(4).all(|&r| r > 0),
+            "{}: a rank swept no block: {rows:?}",
+            other.what
         );
         assert_same_result(&reference, &other);
+    }
+    // With the render rank: rank 2 draws, ranks 0 and 1 share the blocks.
+    let text = layer_text(0.3) + "\n[render]\nsize = [160, 90]\nevery = 0.1\n";
+    let rendered = scene_file(root.path(), "layer_rendered.toml", &text);
+    let with = run(
+        root.path(),
+        "np3-render",
+        Ranks::Np(3),
+        &rendered,
+        &["--island-blocks", "4"],
+    );
+    assert_eq!(with.roles()[2], (2, "renderer".into()));
+    assert!(
+        with.count(&["frames_rendered"]) > 0,
+        "rank 2 rendered nothing"
+    );
+    let rows = block_rows(&with);
+    assert!(
+        rows[0] > 0 && rows[1] > 0 && rows[2] == 0,
+        "{}: the blocks went {rows:?}",
+        with.what
+    );
+    assert_same_result(&reference, &with);
+}
+
+/// A rank slowed three times (`--slow-rank 2=3.0`) sweeps fewer of a shared
+/// island's blocks than its equal peer, by the speeds the block sweeps
+/// measure, and the island ends as on one rank. Eight blocks over three
+/// ranks with speeds 1 : 1 : 1/3 give the slowed rank about a third of
+/// rank 1's rows; on 2 shared cores it measures slower than 3× (it spins
+/// through its stall and is preempted more), so the band only asks for
+/// clearly less, and an equal run for no such gap.
+#[test]
+fn a_slowed_rank_sweeps_fewer_blocks() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = scene_file(root.path(), "layer.toml", &layer_text(0.5));
+    let args = ["--island-blocks", "8", "--no-render"];
+    let reference = run(root.path(), "np1", Ranks::Np(1), &scene, &args);
+    let share = |run: &Run| {
+        let rows = block_rows(run);
+        assert!(rows[1] > 0, "{}: rank 1 swept no block: {rows:?}", run.what);
+        rows[2] as f64 / rows[1] as f64
+    };
+    let equal = run(root.path(), "np3-equal", Ranks::Np(3), &scene, &args);
+    let slow_args = [&args[..], &["--slow-rank", "2=3.0"]].concat();
+    let slowed = run(root.path(), "np3-slow", Ranks::Np(3), &scene, &slow_args);
+    let (equal_share, slowed_share) = (share(&equal), share(&slowed));
+    eprintln!(
+        "[cluster_mpi] block rows rank 2 / rank 1: {equal_share:.3} equal, {slowed_share:.3} \
+         with rank 2 three times slower (expected about 0.33)"
+    );
+    assert!(
+        equal_share >= 0.5,
+        "two equal workers should share the blocks about evenly, got {equal_share:.3}"
+    );
+    assert!(
+        slowed_share <= 0.75 * equal_share,
+        "the slowed rank swept {slowed_share:.3} of rank 1's rows (equal: {equal_share:.3})"
+    );
+    assert_same_result(&reference, &equal);
+    assert_same_result(&reference, &slowed);
+}
+
+/// A run that shares an island by blocks resumes from its checkpoint on
+/// another rank count (2 → 3 and 2 → 1 alone) to the uninterrupted run's
+/// state hash: the blocks are a rule of the island, not of the ranks.
+#[test]
+fn a_checkpoint_of_shared_blocks_resumes_on_another_rank_count() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = layer_of_cubes(root.path());
+    let args = ["--island-blocks", "4", "--no-render"];
+    let whole = run(root.path(), "whole", Ranks::Np(1), &scene, &args);
+    let first_args = [
+        &args[..],
+        &["--duration", "0.15", "--checkpoint-every", "0.15"],
+    ]
+    .concat();
+    let first = run(root.path(), "first", Ranks::Np(2), &scene, &first_args);
+    assert!(
+        first.count(&["distributed", "islands_shared"]) > 0,
+        "{}: no island was shared by blocks",
+        first.what
+    );
+    let checkpoint = first.out.join("checkpoint.bin");
+    let from = checkpoint.to_str().expect("a UTF-8 path");
+    for (label, ranks) in [("then-np3", Ranks::Np(3)), ("then-alone", Ranks::Alone)] {
+        let resumed_args = [&args[..], &["--resume", from]].concat();
+        let resumed = run(root.path(), label, ranks, &scene, &resumed_args);
+        assert_eq!(
+            whole.state_hash(),
+            resumed.state_hash(),
+            "{}: resumed from a 2-rank checkpoint, the state differs",
+            resumed.what
+        );
+        assert_eq!(resumed.count(&["steps"]), whole.count(&["steps"]));
     }
 }
 
@@ -1101,11 +1212,28 @@ fn stop_rank_once_running(
 fn stalled_worker_ends_the_job_with_an_error_naming_the_rank() {
     let _one = one_at_a_time();
     let root = temp_root();
-    let out = root.path().join("stalled");
     let scene = scene("load_profile.toml");
     let args = ["--duration", "600", "--no-render", "--force-distribute"];
-    let what = describe(Ranks::Np(3), &scene, &args);
-    let mut job = spawn(command(Ranks::Np(3), &scene, &out, &args), &out);
+    check_stalled_worker(root.path(), &scene, &args);
+}
+
+/// The same while the ranks share an island's blocks: the layer of cubes
+/// kept awake, so that every step's solve exchanges blocks with rank 1.
+#[test]
+fn worker_stalled_in_a_shared_island_ends_the_job_naming_it() {
+    let _one = one_at_a_time();
+    let root = temp_root();
+    let scene = scene_file(root.path(), "layer.toml", &layer_text(600.0));
+    let args = ["--island-blocks", "4", "--no-sleep", "--no-render"];
+    check_stalled_worker(root.path(), &scene, &args);
+}
+
+/// Runs `scene` on 3 ranks, stops rank 1 once the run is under way, and
+/// asserts that the job ends with an error naming rank 1.
+fn check_stalled_worker(root: &Path, scene: &Path, args: &[&str]) {
+    let out = root.join("stalled");
+    let what = describe(Ranks::Np(3), scene, args);
+    let mut job = spawn(command(Ranks::Np(3), scene, &out, args), &out);
     let victim = stop_rank_once_running(&mut job, &out, 3, 1, Duration::from_secs(1), &what);
     let status = wait_for(&mut job, END_AFTER_STALL);
     end_job(&mut job, &out);

@@ -29,6 +29,8 @@ pub(super) struct RankBook {
     pub(super) waiting_s: f64,
     pub(super) bytes_sent: u64,
     pub(super) bytes_received: u64,
+    /// Rows times sweeps of the shared islands' blocks it swept.
+    pub(super) block_rows: u64,
 }
 
 /// Rank 0's executor: decides per stage and per frame whether to distribute;
@@ -137,6 +139,7 @@ impl<'w> MpiExecutor<'w> {
             bytes_received: self.book.iter().map(|b| b.bytes_received).sum(),
             speed: self.speeds[0],
             frames_rendered: 0,
+            block_rows_swept: self.book[0].block_rows,
         }];
         for (k, &w) in self.roles.workers.iter().enumerate() {
             let rep = workers
@@ -157,6 +160,7 @@ impl<'w> MpiExecutor<'w> {
                 bytes_received: rep.bytes_received,
                 speed: self.speeds[k + 1],
                 frames_rendered: 0,
+                block_rows_swept: self.book[k + 1].block_rows,
             });
         }
         out

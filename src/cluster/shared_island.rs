@@ -54,6 +54,7 @@ impl<'e, 'w> SharedBlocks<'e, 'w> {
 
     /// Notes that slot `slot` swept `rows` rows `sweeps` times in `busy_s`.
     fn meter(&mut self, slot: usize, rows: usize, sweeps: usize, busy_s: f64) {
+        self.exec.book[slot].block_rows += (rows * sweeps) as u64;
         if rows > 0 && busy_s > 0.0 {
             self.exec.block_meters[slot].add((rows * sweeps) as f64, busy_s);
         }

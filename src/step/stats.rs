@@ -214,6 +214,10 @@ pub struct RankSummary {
     /// Estimated relative speed (1 = as fast as the model's calibration).
     pub speed: f64,
     pub frames_rendered: u64,
+    /// Rows this rank swept in the blocks of islands shared by blocks,
+    /// times the sweeps (`--island-blocks`; the greedy rule's share).
+    #[serde(default)]
+    pub block_rows_swept: u64,
 }
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
