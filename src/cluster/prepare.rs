@@ -80,17 +80,20 @@ impl MpiExecutor<'_> {
             shares.clone(),
             &share_costs,
             |share| {
-                // Each group's input once, however many of its ranges.
-                let mut groups: Vec<usize> = share.iter().map(|&(g, _)| g).collect();
-                groups.sort_unstable();
-                groups.dedup();
+                // Each range with what its own pairs read, not the whole
+                // group's input (a pile's range names a share of its bodies).
+                let (inputs, shares) = share
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, (g, (from, to)))| {
+                        let trimmed = inputs[g].first_stage_input((from, to));
+                        (trimmed, (i as u32, (0, to - from)))
+                    })
+                    .unzip();
                 Req::PreparePairs {
                     params: params.clone(),
-                    inputs: groups.iter().map(|&g| inputs[g].clone()).collect(),
-                    shares: share
-                        .into_iter()
-                        .map(|(g, range)| (groups.binary_search(&g).expect("listed") as u32, range))
-                        .collect(),
+                    inputs,
+                    shares,
                 }
             },
             |(g, range), poll| prepare_pairs(st, &inputs[g], range, &mut Polled::new(poll)),

@@ -51,7 +51,8 @@ pub enum Request {
     /// pairs. The group then goes out whole with all its answers.
     PreparePairs {
         params: GroupParams,
-        /// The groups the ranges belong to, each once.
+        /// What the ranges read of their groups: per range, the part of
+        /// its group's input its pairs name (`GroupInput::first_stage_input`).
         inputs: Vec<GroupInput>,
         /// Per range: its group (an index into `inputs`) and its pairs.
         shares: Vec<(u32, (usize, usize))>,

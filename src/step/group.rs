@@ -282,49 +282,6 @@ pub(crate) fn group_input(
     }
 }
 
-/// The first stage of group `input`'s step for its pairs `from..to`
-/// (`PreparedPairs`), on any rank; `exec` runs its narrowphase batch.
-pub fn prepare_pairs(
-    st: &StepStatic,
-    input: &GroupInput,
-    (from, to): (usize, usize),
-    exec: &mut dyn Executor,
-) -> PreparedPairs {
-    let clock = std::time::Instant::now();
-    let pairs = &input.pairs[from..to];
-    let mut state = RegionState {
-        bodies: input.bodies.clone(),
-        features: input
-            .features
-            .iter()
-            .filter(|(k, _)| pairs.binary_search(k).is_ok())
-            .cloned()
-            .collect(),
-        sleep_timer: input.sleep_timer.clone(),
-        sleep_group: input.sleep_group.clone(),
-        ..Default::default()
-    };
-    let mut g = state.region(st, input.ids.clone());
-    let separating: PairMap<Vector3<f64>> = input.separating.iter().cloned().collect();
-    let since: SolvedSince = input.since.iter().cloned().collect();
-    let results = g.narrowphase_skipping_separating(exec, pairs, &input.end, &separating);
-    let timer = g.stage.start(Stage::TimeOfImpact);
-    let (h, seg, since) = (st.settings.dt, &input.seg, &since);
-    let toi = pairs
-        .iter()
-        .zip(&results)
-        .map(|(&k, r)| g.time_of_impact(PairAsk { k, r, seg, since }, h))
-        .collect();
-    g.stage.stop(timer);
-    PreparedPairs {
-        results,
-        toi,
-        counters: state.counters,
-        stage: state.stage,
-        busy_s: clock.elapsed().as_secs_f64(),
-    }
-}
-
 /// Steps one group from its input, anywhere: the same function on rank 0
 /// and on a worker. Its narrowphase batches and island solves go through
 /// `exec`.

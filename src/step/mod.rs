@@ -29,6 +29,7 @@
 mod contact;
 mod event_path;
 mod executor;
+mod first_stage;
 mod frame;
 mod group;
 mod impacts;
@@ -48,7 +49,8 @@ pub use executor::{
     Executor, GroupFailure, GroupInput, GroupOutput, GroupParams, GroupReply, PreparedPairs,
     StepStatic,
 };
-pub use group::{SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, prepare_pairs, run_group};
+pub use first_stage::prepare_pairs;
+pub use group::{SPLIT_AUTO_MIN_MEMBERS, SPLIT_MIN_MEMBERS, run_group};
 pub use impacts::EVENTS_PER_BODY;
 pub use settings::{GROUP_MARGIN, StepSettings};
 pub use sleep::{SLEEP_ANGULAR, SLEEP_LINEAR};
@@ -220,7 +222,7 @@ impl Executor for Inline {
         self.clock.enter();
         let clock = Instant::now();
         let prepared = self.each(StageKind::PreparePairs, &inputs, |input| {
-            group::prepare_pairs(st, input, (0, input.pair_count()), &mut Inline::default())
+            first_stage::prepare_pairs(st, input, (0, input.pair_count()), &mut Inline::default())
         });
         self.narrowphase_tasks += prepared.iter().map(PreparedPairs::tasks).sum::<u64>();
         self.busy_s += clock.elapsed().as_secs_f64();
