@@ -15,19 +15,33 @@ use crate::collision::narrowphase::PairResult;
 use nalgebra::Vector3;
 use std::collections::BTreeSet;
 
+/// What one step hands the next besides the bodies the region holds.
+pub(super) struct Carried<'a> {
+    /// The contacts touching at the step's end (the next step's islands).
+    pub touching: &'a mut Vec<Touching>,
+    /// Completed steps.
+    pub steps: &'a mut u64,
+    /// The deepest overlap committed so far.
+    pub max_penetration: &'a mut f64,
+    /// What each body's group took (the schedule's prediction of the next).
+    pub work: &'a mut GroupWork,
+}
+
 /// One step of the whole world (`World::step`).
 pub(super) fn step_world(
     w: &mut Region,
-    touching: &mut Vec<Touching>,
-    first: bool,
     exec: &mut dyn Executor,
-    max_penetration: &mut f64,
-    steps: &mut u64,
-    work: &mut GroupWork,
+    carried: Carried,
 ) -> Result<(), NumericalFailure> {
+    let Carried {
+        touching,
+        steps,
+        max_penetration,
+        work,
+    } = carried;
     let (h, t0) = (w.st.settings.dt, w.st.t0);
     w.wake_for_forces(t0, h);
-    if first && touching.is_empty() {
+    if *steps == 0 && touching.is_empty() {
         *touching = touching_at_start(w, exec);
     }
     // build_islands + solve_islands: impacts and resting forces of the

@@ -409,7 +409,6 @@ impl World {
     pub fn step(&mut self, exec: &mut dyn Executor) -> Result<(), NumericalFailure> {
         let st = GroupParams::new(self.time(), self.settings).statics(&self.scene);
         let (s, d) = (&mut self.state, &mut self.diagnostics);
-        let first = s.steps == 0;
         let fallen_before = d.counters.bodies_fallen;
         let mut world = Region {
             st: &st,
@@ -425,15 +424,13 @@ impl World {
             keep_answers: false,
             gathered: Gathered::default(),
         };
-        let result = frame::step_world(
-            &mut world,
-            &mut s.touching,
-            first,
-            exec,
-            &mut d.max_penetration,
-            &mut s.steps,
-            &mut d.group_work,
-        );
+        let carried = frame::Carried {
+            touching: &mut s.touching,
+            steps: &mut s.steps,
+            max_penetration: &mut d.max_penetration,
+            work: &mut d.group_work,
+        };
+        let result = frame::step_world(&mut world, exec, carried);
         let Gathered {
             pair_forces,
             captured,
