@@ -4,7 +4,8 @@
 # expect") against what the ranks measure, on this machine, --no-render:
 #   - shared memory: a short 2-rank run measures the link (round trip and
 #     rate to the worker); one rank then predicts over that link, and
-#     `mpirun -np 2` measures the ratio it predicts;
+#     `mpirun -np 2` measures the ratio it predicts against one rank run
+#     without --predict (whose measuring is not the run's);
 #   - the lab's default link (100 Mbit/s as scripts/lab.sh measured it):
 #     one rank predicts 2, 4, 8 and 16 ranks, with its groups whole and
 #     with --split-groups (the parts it steps are the tasks predicted);
@@ -74,6 +75,7 @@ echo "bench_predict: shared memory: $latency_us us one way, $rate B/s" >&2
 
 for scene in $SCENES; do
   for rep in $(seq 1 "$(reps "$scene")"); do
+    run "$scene" 1 "$tmp/$scene-one-$rep"
     run "$scene" 1 "$tmp/$scene-shm-$rep" --predict --link-latency-us "$latency_us" --link-bytes-per-s "$rate"
     run "$scene" 2 "$tmp/$scene-np2-$rep"
   done
@@ -107,18 +109,20 @@ if not scenes:
     print("(no scenes: SCENES=)\n")
 print(f"Shared memory as a 2-rank run measured it: {float(latency_us):.2f} µs one way, "
       f"{float(rate) / 1e6:.0f} MB/s.\n")
-print("| scene | runs | 1 rank [s] | 2 ranks [s] | measured 2 / 1 | predicted 2 / 1 | prediction off by | state hashes |")
-print("|---|---|---|---|---|---|---|---|")
+print("| scene | runs | 1 rank [s] | 2 ranks [s] | measured 2 / 1 | predicted 2 / 1 | prediction off by | 1 rank with --predict [s] | state hashes |")
+print("|---|---|---|---|---|---|---|---|---|")
 for scene in scenes:
     n = reps if scene == "crowd200" else "1"
+    plain = [load(f"{scene}-one-{r}") for r in range(1, int(n) + 1)]
     one = [load(f"{scene}-shm-{r}") for r in range(1, int(n) + 1)]
     two = [load(f"{scene}-np2-{r}") for r in range(1, int(n) + 1)]
-    w1 = statistics.median(s["wall_time_s"] for s in one)
+    w1 = statistics.median(s["wall_time_s"] for s in plain)
     w2 = statistics.median(s["wall_time_s"] for s in two)
+    wp = statistics.median(s["wall_time_s"] for s in one)
     pred = statistics.median(1 / s["distributed"]["predicted"][0]["speedup"] for s in one)
-    hashes = {s["state_hash"] for s in one + two}
+    hashes = {s["state_hash"] for s in plain + one + two}
     print(f"| {scene} | {n} | {w1:.2f} | {w2:.2f} | {w2 / w1:.3f} | {pred:.3f} | "
-          f"{(pred - w2 / w1) / (w2 / w1) * 100:+.0f} % | {', '.join(sorted(hashes))} |")
+          f"{(pred - w2 / w1) / (w2 / w1) * 100:+.0f} % | {wp:.2f} | {', '.join(sorted(hashes))} |")
 print("\n## What the predicted wall is made of, over shared memory (`by_stage`)\n")
 print("Seconds of the one-rank run's prediction: rank 0's own (everything outside "
       "the stages other ranks take) and each stage as the scheduler would share it.\n")

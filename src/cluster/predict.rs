@@ -17,7 +17,9 @@
 
 use super::scatter::{CHUNK_SHARE, COORDINATOR_SHARE};
 use super::schedule;
-use crate::step::profile::{BlockRound, StageCall, StageKind, StepProfile, StepSink, TaskCost};
+use crate::step::profile::{
+    BlockRound, Codec, StageCall, StageKind, StepProfile, StepSink, TaskCost,
+};
 use crate::step::stats::{
     BOUND_RANKS, Distribution, PredictedRanks, PredictedStages, PredictionLink,
 };
@@ -230,8 +232,10 @@ impl SharedLink<'_> {
 /// scheduler knows of them (`TaskCost::known`); rank 0 takes one at a time
 /// from the back, each worker a chunk from the front of at least
 /// `CHUNK_SHARE` of its share of what is known to be left, the next chunk
-/// one round trip after it answers; each task takes the seconds it took.
-/// Every rank as fast as this one.
+/// one round trip after it answers; each task takes the seconds it took,
+/// and a chunk the encoding and decoding of its messages, rank 0's part of
+/// which also keeps rank 0 from its own tasks. Every rank as fast as this
+/// one.
 fn self_scheduled_s(tasks: &[TaskCost], order: &[usize], ranks: usize, link: &LinkModel) -> f64 {
     let (mut front, mut back) = (0, order.len());
     let mut left: f64 = tasks.iter().map(TaskCost::known).sum();
@@ -257,15 +261,19 @@ fn self_scheduled_s(tasks: &[TaskCost], order: &[usize], ranks: usize, link: &Li
         }
         let want = CHUNK_SHARE * left / ranks as f64;
         let (first, mut known, mut cost, mut bytes) = (front, 0.0, 0.0, 0);
+        let mut codec = Codec::default();
         while front < back && (front == first || known < want) {
             let task = &tasks[order[front]];
             known += task.known();
             cost += task.seconds;
             bytes += task.bytes;
+            codec.rank0_s += task.codec.rank0_s;
+            codec.worker_s += task.codec.worker_s;
             front += 1;
         }
         left -= known;
-        let done = shared.send(t, bytes) + cost;
+        rank0 += codec.rank0_s;
+        let done = shared.send(t, bytes) + cost + codec.worker_s + codec.rank0_s;
         answered = answered.max(done + link.latency_s);
         worker_free[w] = done + 2.0 * link.latency_s;
     }
@@ -273,7 +281,8 @@ fn self_scheduled_s(tasks: &[TaskCost], order: &[usize], ranks: usize, link: &Li
 }
 
 /// The greedy plan (`schedule::assign`): one message per worker, rank 0
-/// planned at `COORDINATOR_SHARE` of its speed.
+/// planned at `COORDINATOR_SHARE` of its speed; rank 0 encodes and decodes
+/// the workers' messages besides its own tasks.
 fn planned_s(tasks: &[TaskCost], ranks: usize, link: &LinkModel) -> f64 {
     let costs: Vec<f64> = tasks.iter().map(|t| t.seconds).collect();
     let slot = schedule::assign(&costs, &vec![1.0; ranks], COORDINATOR_SHARE);
@@ -282,6 +291,10 @@ fn planned_s(tasks: &[TaskCost], ranks: usize, link: &LinkModel) -> f64 {
     for (task, &r) in tasks.iter().zip(&slot) {
         load[r] += task.seconds;
         bytes[r] += task.bytes;
+        if r > 0 {
+            load[0] += task.codec.rank0_s;
+            load[r] += task.codec.worker_s;
+        }
     }
     slots_s(&load, &bytes, link)
 }
@@ -354,6 +367,33 @@ mod tests {
                 "{ranks} ranks: {s}"
             );
         }
+    }
+
+    /// A task sent out costs its encoding and decoding: rank 0's part
+    /// (its request, its answer) and the worker's, on the chunk's path and
+    /// rank 0's part on rank 0's time too. Two 1 s tasks on 2 ranks over a
+    /// free link: 1 s without, 1.3 s with 0.1 s and 0.2 s of it.
+    #[test]
+    fn a_sent_tasks_encoding_counts() {
+        let mut call = StageCall {
+            kind: StageKind::GroupSteps,
+            tasks: tasks(&[1.0, 1.0], 1),
+        };
+        assert_eq!(stage_s(&call, 2, &FREE), 1.0);
+        for task in &mut call.tasks {
+            task.codec = Codec {
+                rank0_s: 0.1,
+                worker_s: 0.2,
+            };
+        }
+        assert!((stage_s(&call, 2, &FREE) - 1.3).abs() < 1e-12);
+        // The greedy plan: the worker's 1 s task and its 0.2 s, rank 0's
+        // 1 s and its 0.1 s.
+        let planned = StageCall {
+            kind: StageKind::Narrowphase,
+            ..call
+        };
+        assert!((stage_s(&planned, 2, &FREE) - 1.2).abs() < 1e-12);
     }
 
     /// One task that is 95 % of the work bounds any number of ranks.

@@ -64,9 +64,10 @@ use crate::collision::narrowphase::{self, CachedFeatures, PairResult, PairTask};
 use crate::contact::solver::{self, IslandResult, IslandTask};
 use crate::scene::Scene;
 use nalgebra::{Point3, Vector3};
-use profile::{BlockRound, Profiler, StageKind, StepSink, TaskCost, TimedBlocks, wire_bytes};
+use profile::{BlockRound, Profiler, StageKind, StepSink, TaskCost, TimedBlocks};
 use region::{Gathered, Region};
 use serde::Serialize;
+use serde::de::DeserializeOwned;
 use stats::{Distribution, GroupWork, RankSummary};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
@@ -107,12 +108,13 @@ impl Inline {
             let mut timed = TimedBlocks::default();
             let answer = solver::solve_island_with(task, &mut timed);
             if let Some(p) = &mut self.profiler {
+                let seconds = started.elapsed().as_secs_f64();
+                let (asked, answered) = (p.wire(task), p.wire(&answer));
                 p.add(TaskCost {
-                    seconds: started.elapsed().as_secs_f64(),
-                    bytes: wire_bytes(task) + wire_bytes(&answer),
                     estimate: task.cost_units(),
                     by_blocks: solver::sweeps_by_blocks(task),
                     rounds: timed.rounds,
+                    ..TaskCost::sent(seconds, asked, answered)
                 });
             } else if let Some(rounds) = &mut self.group_rounds {
                 rounds.extend(timed.rounds);
@@ -126,7 +128,7 @@ impl Inline {
     }
 
     /// Runs `f` on each task; with a profiler, as one stage call of `kind`.
-    fn each<T: Serialize, R: Serialize>(
+    fn each<T: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned>(
         &mut self,
         kind: StageKind,
         tasks: &[T],
@@ -190,17 +192,17 @@ impl Executor for Inline {
         let replies = inputs
             .into_iter()
             .map(|input| {
-                let started = Instant::now();
-                let asked = profiler.is_some().then(|| wire_bytes(&input));
+                let asked = profiler.as_mut().map(|p| p.wire(&input));
                 let estimate = input.predicted_s();
+                let started = Instant::now();
                 let reply = group::run_group(st, input, self);
                 if let (Some(p), Some(asked)) = (&mut profiler, asked) {
+                    let seconds = started.elapsed().as_secs_f64();
+                    let answered = p.wire(&reply);
                     p.add(TaskCost {
-                        seconds: started.elapsed().as_secs_f64(),
-                        bytes: asked + wire_bytes(&reply),
                         estimate,
-                        by_blocks: false,
                         rounds: self.group_rounds.replace(Vec::new()).unwrap_or_default(),
+                        ..TaskCost::sent(seconds, asked, answered)
                     });
                 }
                 reply

@@ -7,6 +7,7 @@
 use super::stats::Distribution;
 use crate::contact::block_sweeps::{BlockRunner, SweptBlocks};
 use serde::Serialize;
+use serde::de::DeserializeOwned;
 use std::time::Instant;
 
 /// The distributable stages, as `Executor`'s methods name them.
@@ -24,6 +25,8 @@ pub struct TaskCost {
     pub seconds: f64,
     /// Its request and its answer, encoded as the cluster sends them.
     pub bytes: u64,
+    /// The seconds encoding and decoding them take, where it is sent out.
+    pub codec: Codec,
     /// What the scheduler knows of it beforehand, in its stage's own
     /// units (an island's `cost_units`, a group's `predicted_s`): what it
     /// orders and cuts the tasks by. 0: unknown, its seconds stand in.
@@ -55,7 +58,59 @@ pub struct BlockWork {
     pub bytes: u64,
 }
 
+/// A message as the cluster would send it, encoded and decoded here: its
+/// bytes, and the seconds its sender takes to encode it and its receiver
+/// to decode it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Wire {
+    pub bytes: u64,
+    pub encode_s: f64,
+    pub decode_s: f64,
+}
+
+impl Wire {
+    /// `value` encoded as `cluster::protocol` encodes it (bincode,
+    /// standard configuration), and decoded back.
+    pub fn of<T: Serialize + DeserializeOwned>(value: &T) -> Wire {
+        let config = bincode::config::standard();
+        let started = Instant::now();
+        let bytes = bincode::serde::encode_to_vec(value, config).expect("a task encodes");
+        let encode_s = started.elapsed().as_secs_f64();
+        let started = Instant::now();
+        let (decoded, _): (T, usize) =
+            bincode::serde::decode_from_slice(&bytes, config).expect("a task decodes");
+        let decode_s = started.elapsed().as_secs_f64();
+        drop(decoded);
+        Wire {
+            bytes: bytes.len() as u64,
+            encode_s,
+            decode_s,
+        }
+    }
+}
+
+/// What encoding and decoding a task sent out costs each side: rank 0
+/// encodes its request and decodes its answer, the worker the other way.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Codec {
+    pub rank0_s: f64,
+    pub worker_s: f64,
+}
+
 impl TaskCost {
+    /// A task of `seconds` whose request and answer travel as measured.
+    pub fn sent(seconds: f64, request: Wire, answer: Wire) -> TaskCost {
+        TaskCost {
+            seconds,
+            bytes: request.bytes + answer.bytes,
+            codec: Codec {
+                rank0_s: request.encode_s + answer.decode_s,
+                worker_s: request.decode_s + answer.encode_s,
+            },
+            ..Default::default()
+        }
+    }
+
     /// What the scheduler orders and cuts it by (`estimate`).
     pub fn known(&self) -> f64 {
         if self.estimate > 0.0 {
@@ -153,6 +208,11 @@ pub struct Profiler {
     step: StepProfile,
     step_started: Instant,
     call: Vec<TaskCost>,
+    /// Seconds of this step spent measuring messages (`wire`): the
+    /// profile's own, not the step's.
+    measuring_s: f64,
+    /// The same over the run.
+    measured_s: f64,
 }
 
 impl Profiler {
@@ -162,27 +222,31 @@ impl Profiler {
             step: StepProfile::default(),
             step_started: Instant::now(),
             call: Vec::new(),
+            measuring_s: 0.0,
+            measured_s: 0.0,
         }
+    }
+
+    /// `value` as a message (`Wire::of`), the time that takes left out of
+    /// the step's wall.
+    pub(crate) fn wire<T: Serialize + DeserializeOwned>(&mut self, value: &T) -> Wire {
+        let started = Instant::now();
+        let wire = Wire::of(value);
+        self.measuring_s += started.elapsed().as_secs_f64();
+        wire
     }
 
     /// Adds a task of the call under way: its seconds since `started`,
     /// its request and its answer.
-    pub(crate) fn task<T: Serialize, R: Serialize>(
+    pub(crate) fn task<T: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned>(
         &mut self,
         started: Instant,
         request: &T,
         answer: &R,
     ) {
-        self.task_of(started, wire_bytes(request) + wire_bytes(answer));
-    }
-
-    /// Adds a task of the call under way that took `bytes` of messages.
-    pub(crate) fn task_of(&mut self, started: Instant, bytes: u64) {
-        self.add(TaskCost {
-            seconds: started.elapsed().as_secs_f64(),
-            bytes,
-            ..Default::default()
-        });
+        let seconds = started.elapsed().as_secs_f64();
+        let (request, answer) = (self.wire(request), self.wire(answer));
+        self.add(TaskCost::sent(seconds, request, answer));
     }
 
     /// Adds a task of the call under way, as measured.
@@ -199,8 +263,9 @@ impl Profiler {
     /// Ends the step under way and starts the next.
     pub(crate) fn end_step(&mut self) {
         let now = Instant::now();
-        self.step.wall_s = (now - self.step_started).as_secs_f64();
+        self.step.wall_s = (now - self.step_started).as_secs_f64() - self.measuring_s;
         self.step_started = now;
+        self.measured_s += std::mem::take(&mut self.measuring_s);
         self.sink.step(&self.step);
         self.step.stages.clear();
     }
@@ -210,6 +275,7 @@ impl Profiler {
     pub(crate) fn close(&mut self, distribution: &mut Distribution) {
         self.end_step();
         self.sink.close(distribution);
+        distribution.prediction_measuring_s = self.measured_s;
     }
 }
 

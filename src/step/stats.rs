@@ -297,6 +297,10 @@ pub struct Distribution {
     /// `--link-bytes-per-s`).
     #[serde(default)]
     pub prediction_link: Option<PredictionLink>,
+    /// Seconds the prediction spent encoding and decoding the tasks'
+    /// messages to time them, which it leaves out of the one-rank time.
+    #[serde(default)]
+    pub prediction_measuring_s: f64,
 }
 
 /// One entry of `Distribution::predicted`.
