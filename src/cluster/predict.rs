@@ -83,7 +83,7 @@ impl StepSink for Prediction {
         for i in 0..BOUND_RANKS.len() {
             // Rank 0 alone is always a choice: never longer than the step
             // took (which the sums above meet only to their rounding).
-            step_s[i] = step_s[i].min(profile.wall_s.max(own));
+            step_s[i] = step_s[i].min(profile.wall_s);
             self.predicted_s[i] += step_s[i];
             add_stages(&mut self.by_stage[i], &step[i]);
             self.worst_step_s[i] = self.worst_step_s[i].max(step_s[i]);

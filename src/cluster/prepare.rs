@@ -82,7 +82,7 @@ impl MpiExecutor<'_> {
             |share| {
                 // Each range with what its own pairs read, not the whole
                 // group's input (a pile's range names a share of its bodies).
-                let (inputs, shares) = share
+                let (read, shares) = share
                     .into_iter()
                     .enumerate()
                     .map(|(i, (g, (from, to)))| {
@@ -92,7 +92,7 @@ impl MpiExecutor<'_> {
                     .unzip();
                 Req::PreparePairs {
                     params: params.clone(),
-                    inputs,
+                    inputs: read,
                     shares,
                 }
             },
